@@ -1,0 +1,69 @@
+"""Options and output helpers shared by the subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+from ..errors import UsageError
+from ..paraxial import stopped_down
+from ..prescription import LensPrescription, read_lens
+
+
+def add_lens_arguments(p: argparse.ArgumentParser) -> None:
+    """LENS plus the stop options (--f-number / --stop-diameter)."""
+    p.add_argument("lens", metavar="LENS",
+                   help="lens file (pbrt/Kolb format) or the name of a bundled lens, "
+                        "e.g. dgauss.50mm")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--f-number", type=positive_float, metavar="N",
+                   help="stop the lens down to this f-number (EFL / entrance-pupil diameter)")
+    g.add_argument("--stop-diameter", type=positive_float, metavar="MM",
+                   help="set the aperture-stop diameter in mm")
+
+
+def load_lens(args) -> LensPrescription:
+    lens = read_lens(args.lens)
+    return stopped_down(lens, stop_diameter_mm=getattr(args, "stop_diameter", None),
+                        f_number=getattr(args, "f_number", None))
+
+
+def positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"'{text}' must be a positive finite number")
+    return v
+
+
+def distance(text: str) -> float:
+    """A positive distance, or 'inf' for infinity."""
+    if text.strip().lower() in ("inf", "infinity"):
+        return math.inf
+    return positive_float(text)
+
+
+def print_json(obj) -> None:
+    json.dump(obj, sys.stdout, indent=2, allow_nan=False, default=_default)
+    sys.stdout.write("\n")
+
+
+def _default(o):
+    try:
+        import numpy as np
+        if isinstance(o, np.generic):
+            return o.item()
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+    except ImportError:  # pragma: no cover
+        pass
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def require(cond: bool, message: str, hint: str | None = None) -> None:
+    if not cond:
+        raise UsageError(message, hint)
