@@ -19,7 +19,8 @@ the same sense as an axial ray (``n . d`` has the sign of ``d_s`` for the normal
 evaluated as ``(sigma sqrt(D) - B) / c`` when B and sigma have opposite signs,
 so that neither form cancels catastrophically (Welford, *Aberrations of Optical
 Systems*, ch. 4; Spencer & Murty 1962).  For c = 0 it reduces exactly to the
-plane intersection, so a flat face and R = 1e9 mm agree to rounding.
+plane intersection, and for tiny c it converges to it smoothly: R = 1e9 mm
+differs from a plane only by its true sag (c r^2 / 2, 5e-8 mm at r = 10 mm).
 
 Refraction is the vector form of Snell's law (Heckbert's form, as in pbrt's
 ``Refract``): with mu = n1/n2 and cos_i = n . d,
@@ -33,8 +34,8 @@ behind itself (t < -1e-9 mm), lands on the far branch (1 - c s <= 0), lands
 outside the clear aperture (x^2 + y^2 > r_i^2, also at apertures), is
 totally internally reflected, or turns back (its axial direction reverses or
 becomes 0).  Blocked rays are returned with ``passed = False`` and
-``blocked_at = i``; their origin and direction are the last finite values they
-had, so no NaN or inf ever leaves this module.
+``blocked_at = i``; their origin and direction are the input origin and the
+normalised input direction (finite), so no NaN or inf ever leaves this module.
 """
 
 from __future__ import annotations
@@ -56,8 +57,9 @@ BACKWARD_TOLERANCE_MM = 1e-9
 class TraceResult:
     """Rays after the lens, in the camera frame.
 
-    origin_mm : (n, 3) where each ray leaves the last surface it crossed.
-    direction : (n, 3) unit directions.
+    origin_mm : (n, 3) where each passed ray leaves the last surface (blocked
+        rays: their input origin).
+    direction : (n, 3) unit directions (blocked rays: the input direction).
     passed : (n,) bool.
     blocked_at : (n,) int, index of the surface that blocked the ray, -1 if passed.
     """

@@ -1,0 +1,168 @@
+"""``povlens convert`` / ``render`` / ``composite`` / ``render-batch`` / ``render-view``."""
+
+from __future__ import annotations
+
+import os
+
+from ..convert import METHODS, ConvertOptions, convert
+from ..errors import UsageError
+from ..film import parse_film_size
+from ..focus import UNITS_MM
+from .common import positive_float, print_json
+
+
+def _vector(text: str):
+    try:
+        v = tuple(float(t) for t in text.replace("<", "").replace(">", "").split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 3:
+        import argparse
+        raise argparse.ArgumentTypeError(f"'{text}' is not a vector x,y,z")
+    return v
+
+
+def _add_convert_arguments(p) -> None:
+    p.add_argument("scene", metavar="SCENE.pov", help="an ordinary POV-Ray scene (not modified)")
+    p.add_argument("--lens", required=True, help="lens file or bundled lens name")
+    p.add_argument("--focus", type=positive_float, required=True, metavar="DIST",
+                   help="distance from the camera location to the plane in focus, scene units")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--f-number", type=positive_float, metavar="N", help="stop down to f/N")
+    g.add_argument("--stop-diameter", type=positive_float, metavar="MM",
+                   help="aperture-stop diameter in mm")
+    p.add_argument("--film-diagonal", type=positive_float, default=35.0, metavar="MM",
+                   help="film diagonal in mm; the film takes the image's aspect (default 35)")
+    p.add_argument("--film-size", metavar="W,H", help="film width and height in mm instead")
+    p.add_argument("--units", choices=sorted(UNITS_MM), default="m",
+                   help="what one scene unit is (default m)")
+    p.add_argument("--width", type=int, default=160, help="image width in pixels (default 160)")
+    p.add_argument("--height", type=int, default=120, help="image height in pixels (default 120)")
+    p.add_argument("--method", choices=METHODS, default="mesh",
+                   help="pinhole, focal-blur (equivalent thin lens) or mesh (exact lens rays "
+                        "per sample; default)")
+    p.add_argument("--samples", type=int, default=16,
+                   help="lens samples per pixel (mesh renders, or focal_blur's blur_samples)")
+    p.add_argument("--batch-size", type=int, default=8,
+                   help="lens samples per POV-Ray process (default 8)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sample sequence")
+    p.add_argument("--location", type=_vector, metavar="X,Y,Z",
+                   help="camera location (instead of the scene's camera)")
+    p.add_argument("--look-at", type=_vector, metavar="X,Y,Z", help="camera look_at point")
+    p.add_argument("--sky", type=_vector, default=(0.0, 1.0, 0.0), metavar="X,Y,Z",
+                   help="camera sky vector (default 0,1,0)")
+    p.add_argument("--thick-lens-focus", action="store_true",
+                   help="place the film by the thick-lens equation, not the real-ray focus")
+    p.add_argument("-o", "--outdir", required=True, metavar="OUTDIR", help="output folder")
+    p.add_argument("--json", action="store_true", help="print the plan as JSON")
+
+
+def options_from_args(args) -> ConvertOptions:
+    if args.width < 1 or args.height < 1:
+        raise UsageError(f"--width/--height {args.width}x{args.height}: must be at least 1 pixel")
+    if args.samples < 1:
+        raise UsageError(f"--samples {args.samples}: must be at least 1")
+    if args.batch_size < 1:
+        raise UsageError(f"--batch-size {args.batch_size}: must be at least 1")
+    return ConvertOptions(
+        scene=args.scene, lens=args.lens, focus=args.focus, outdir=args.outdir,
+        f_number=args.f_number, stop_diameter_mm=args.stop_diameter,
+        film_diagonal_mm=args.film_diagonal,
+        film_size_mm=parse_film_size(args.film_size) if args.film_size else None,
+        units=args.units, width=args.width, height=args.height, method=args.method,
+        samples=args.samples, batch_size=args.batch_size, seed=args.seed,
+        location=args.location, look_at=args.look_at, sky=args.sky,
+        real_focus=not args.thick_lens_focus)
+
+
+def _summary(plan: dict) -> str:
+    f, m, e = plan["focus"], plan["thin_lens"], plan["model_error"]
+    cam = plan["povray_camera"]
+    return "\n".join([
+        f"lens {plan['inputs']['lens']}  f/{plan['lens']['f_number']:.3g}  "
+        f"EFL {plan['lens']['efl_mm']:.2f} mm",
+        f"film distance {f['film_distance_mm']:.4f} mm (thick lens "
+        f"{f['thick_lens_film_distance_mm']:.4f} mm)",
+        f"equivalent thin lens: hfov {cam['hfov_deg']:.3f} deg, pupil "
+        f"{m['pupil_diameter_mm']:.3f} mm, focal_blur aperture {cam['aperture']:.6g}",
+        f"model error: distortion <= {e['max_distortion_px']:.3f} px, blur size <= "
+        f"{e['max_blur_size_error_px']:.3f} px, illumination >= "
+        f"{e['min_relative_illumination']:.3f} of the centre",
+        f"method {plan['inputs']['method']}, {plan['inputs']['samples']} samples",
+    ])
+
+
+def run_convert(args) -> int:
+    plan = convert(options_from_args(args))
+    if args.json:
+        print_json(plan)
+    else:
+        print(_summary(plan))
+        print(f"wrote {args.outdir}/plan.json and {args.outdir}/Makefile; "
+              f"render with 'make -C {args.outdir} -j{os.cpu_count() or 1}'")
+    return 0
+
+
+def run_render(args) -> int:
+    from ..render import render_outdir
+    plan = convert(options_from_args(args))
+    if not args.quiet:
+        print(_summary(plan))
+    out = render_outdir(args.outdir, jobs=args.jobs, quiet=args.quiet)
+    if not args.quiet:
+        print(f"wrote {out} and {out.with_suffix('.png')}")
+    return 0
+
+
+def run_composite(args) -> int:
+    from ..render import composite_outdir
+    composite_outdir(args.outdir)
+    return 0
+
+
+def run_batch(args) -> int:
+    from ..render import render_batch
+    render_batch(args.outdir, args.batch)
+    return 0
+
+
+def run_view(args) -> int:
+    from ..render import render_view
+    render_view(args.outdir, args.view)
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("convert", help="write a render folder for a scene through a lens",
+                       description="Write OUTDIR with a plan (plan.json), POV-Ray wrappers that "
+                                   "include SCENE and replace its camera, and a Makefile that "
+                                   "renders them ('make -C OUTDIR -j2').  SCENE is not modified.")
+    _add_convert_arguments(p)
+    p.set_defaults(func=run_convert)
+
+    p = sub.add_parser("render", help="convert, render with POV-Ray and composite in one go",
+                       description="Like 'convert', then render every lens sample with POV-Ray "
+                                   "(in parallel) and composite OUTDIR/image.exr and image.png. "
+                                   "Re-running resumes an interrupted render.")
+    _add_convert_arguments(p)
+    p.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1,
+                   help="POV-Ray processes at once (default: number of cores)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    p.set_defaults(func=run_render)
+
+    p = sub.add_parser("composite", help="combine rendered lens samples into image.exr/.png",
+                       description="Average OUTDIR's rendered lens samples with their per-pixel "
+                                   "weights, in linear light, into OUTDIR/image.exr and an sRGB "
+                                   "OUTDIR/image.png.")
+    p.add_argument("outdir", metavar="OUTDIR")
+    p.set_defaults(func=run_composite)
+
+    p = sub.add_parser("render-batch", help="render one batch of lens samples (used by make)")
+    p.add_argument("outdir", metavar="OUTDIR")
+    p.add_argument("batch", type=int, metavar="BATCH")
+    p.set_defaults(func=run_batch)
+
+    p = sub.add_parser("render-view", help="render the pinhole or focal-blur view (used by make)")
+    p.add_argument("outdir", metavar="OUTDIR")
+    p.add_argument("--view", choices=["pinhole", "focal-blur"], required=True)
+    p.set_defaults(func=run_view)

@@ -1,0 +1,343 @@
+"""Scene conversion: from a POV-Ray scene and a lens to a render folder.
+
+``convert`` never edits the user's scene.  It writes into OUTDIR:
+
+* ``plan.json`` — every input and derived number: the lens and its focus, the
+  film, the placement of the camera frame in the scene, the equivalent
+  thin-lens model, what that model gets wrong (measured with the exact tracer),
+  and the render method with its sample batches;
+* ``pinhole.pov`` and ``focal_blur.pov`` — wrappers that ``#include`` the scene
+  and declare their own camera last (POV-Ray uses the last camera);
+* for the mesh method, ``samples/batch_NNN.pov`` wrappers that render lens
+  samples as animation frames (one mesh per frame, so per-sample weights stay
+  exact while the ~0.6 s POV-Ray start-up is paid once per batch) and
+  ``pupil.npz``, the exit-pupil table;
+* ``Makefile`` — ``make -C OUTDIR -j2`` renders and composites; a second
+  ``make`` does nothing.
+
+Scene units: ``units`` says what one scene unit is (the lens is in mm).  The
+focus distance is measured from the camera ``location``, which is where the
+lens's entrance pupil is placed (:mod:`povlens.lens_camera`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import shlex
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .errors import PovlensError, UsageError
+from .film import Film
+from .focus import exact_film_distance_mm, thick_lens_film_distance_mm, UNITS_MM
+from .lens_camera import ScenePlacement
+from .paraxial import paraxial_data, stopped_down
+from .povray import povray_version
+from .mesh_camera import (default_sink_centre, focal_blur_wrapper, pinhole_wrapper, render_size,
+                          write_text)
+from .prescription import read_lens
+from .scene_camera import parse_scene_camera
+from .thin_lens import fit_thin_lens, measure_model_error
+
+__all__ = ["ConvertOptions", "make_plan", "convert", "read_plan", "METHODS"]
+
+METHODS = ("pinhole", "focal-blur", "mesh")
+PLAN_VERSION = 1
+
+
+@dataclasses.dataclass
+class ConvertOptions:
+    """What ``povlens convert`` needs (units: scene units unless named)."""
+
+    scene: str
+    lens: str
+    focus: float                       # distance from the camera location, scene units
+    outdir: str
+    f_number: float | None = None
+    stop_diameter_mm: float | None = None
+    film_diagonal_mm: float = 35.0
+    film_size_mm: tuple[float, float] | None = None
+    units: str = "m"
+    width: int = 160
+    height: int = 120
+    method: str = "mesh"
+    samples: int = 16
+    batch_size: int = 8
+    seed: int = 0
+    location: tuple[float, float, float] | None = None
+    look_at: tuple[float, float, float] | None = None
+    sky: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    real_focus: bool = True            # film at the real-ray focus (else thick lens)
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64)
+    n = np.linalg.norm(v)
+    if not (n > 0 and math.isfinite(n)):
+        raise UsageError(f"degenerate camera vector {v.tolist()}")
+    return v / n
+
+
+def _camera_basis(opts: ConvertOptions):
+    """(location, right, up, forward, source) from options or the scene's camera."""
+    if opts.location is not None or opts.look_at is not None:
+        if opts.location is None or opts.look_at is None:
+            raise UsageError("--location and --look-at go together",
+                             "give both, e.g. --location 0,1.5,-3 --look-at 0,0.7,5")
+        loc = np.asarray(opts.location, float)
+        fwd = _unit(np.asarray(opts.look_at, float) - loc)
+        right = np.cross(np.asarray(opts.sky, float), fwd)
+        if np.linalg.norm(right) < 1e-12:
+            raise UsageError("--sky is parallel to the view direction", "choose another --sky")
+        right = _unit(right)
+        up = np.cross(fwd, right)
+        return loc, right, up, fwd, "command line"
+    cam = parse_scene_camera(opts.scene, opts.width, opts.height)
+    if cam.projection != "perspective":
+        raise UsageError(f"{cam.source}: the scene's camera is {cam.projection}; povlens replaces "
+                         f"it with a lens and needs its position and orientation",
+                         "give --location, --look-at and --sky")
+    return (np.asarray(cam.location, float), _unit(cam.right), _unit(cam.up),
+            _unit(cam.forward), cam.source)
+
+
+def _focus(lens, p, focus_from_pupil_mm: float, real: bool):
+    """Film distance f and object distance from the film D for a focus measured from
+    the entrance pupil.  The pupil moves with the lens, so iterate (3 steps converge
+    to 1e-12 relative: the dependence is through the small focus travel)."""
+    if math.isinf(focus_from_pupil_mm):
+        f = thick_lens_film_distance_mm(lens, math.inf, p)
+        d = math.inf
+    else:
+        f = p.bfl
+        for _ in range(6):
+            d = focus_from_pupil_mm + f + p.total_track - p.entrance_pupil_position
+            f = thick_lens_film_distance_mm(lens, d, p)
+    thick = f
+    spot = None
+    if real:
+        f, spot = exact_film_distance_mm(lens, d, p, thick)
+    return f, d, thick, spot
+
+
+def make_plan(opts: ConvertOptions) -> dict:
+    """Derive every number of a conversion; pure apart from reading the inputs."""
+    if opts.method not in METHODS:
+        raise UsageError(f"--method {opts.method}: unknown method", f"use one of {', '.join(METHODS)}")
+    if opts.units not in UNITS_MM:
+        raise UsageError(f"--units {opts.units}: unknown unit", "use one of mm, cm, m, in")
+    if not (opts.focus > 0):
+        raise UsageError(f"--focus {opts.focus}: must be a positive distance in scene units")
+    if opts.samples < 1:
+        raise UsageError(f"--samples {opts.samples}: must be at least 1")
+    if not Path(opts.scene).is_file():
+        raise UsageError(f"scene file {opts.scene} does not exist", "check the path")
+    mm_per_unit = UNITS_MM[opts.units]
+    lens = stopped_down(read_lens(opts.lens), stop_diameter_mm=opts.stop_diameter_mm,
+                        f_number=opts.f_number)
+    p = paraxial_data(lens)
+    if opts.film_size_mm is not None:
+        film = Film(float(opts.film_size_mm[0]), float(opts.film_size_mm[1]),
+                    int(opts.width), int(opts.height))
+    else:
+        film = Film.from_diagonal(opts.film_diagonal_mm, opts.width, opts.height)
+
+    focus_mm = opts.focus * mm_per_unit
+    film_d, object_d, thick_d, spot = _focus(lens, p, focus_mm, opts.real_focus)
+    model = fit_thin_lens(lens, film_d, object_d, film)
+    loc, right, up, fwd, cam_source = _camera_basis(opts)
+    placement = ScenePlacement.at_entrance_pupil(loc, right, up, fwd, model.centre_z_mm,
+                                                 mm_per_unit)
+    # Depths at which the model is checked: half, once, twice and ten times the focus.
+    if math.isinf(object_d):
+        depths = [model.centre_z_mm + k * 1000.0 * p.efl for k in (1, 10, 100)]
+    else:
+        s = object_d - model.centre_z_mm
+        depths = [model.centre_z_mm + k * s for k in (0.5, 1.0, 2.0, 10.0)]
+    model_error = measure_model_error(lens, film_d, model, film, depths)
+
+    version = povray_version()
+    rw, rh, drop = render_size(film.width_px, film.height_px, version)
+    batches = [list(range(b, min(b + opts.batch_size, opts.samples)))
+               for b in range(0, opts.samples, max(1, opts.batch_size))]
+    pov = {
+        "location": loc.tolist(), "direction": fwd.tolist(),
+        "right": (right * film.width_mm / model.image_distance_mm).tolist(),
+        "up": (up * film.height_mm / model.image_distance_mm).tolist(),
+        "aperture": 2.0 * model.pupil_diameter_mm / mm_per_unit,
+        "focal_distance": (model.focus_distance_mm / mm_per_unit
+                           if math.isfinite(model.focus_distance_mm) else 1e9),
+        "hfov_deg": math.degrees(2 * math.atan(0.5 * film.width_mm / model.image_distance_mm)),
+    }
+    return {
+        "povlens_plan": PLAN_VERSION,
+        "inputs": {
+            "scene": str(Path(opts.scene).resolve()), "lens": lens.source,
+            "lens_sha256": lens.sha256(), "focus": opts.focus, "units": opts.units,
+            "f_number": opts.f_number, "stop_diameter_mm": opts.stop_diameter_mm,
+            "film_diagonal_mm": opts.film_diagonal_mm, "film_size_mm": opts.film_size_mm,
+            "width": opts.width, "height": opts.height, "method": opts.method,
+            "samples": opts.samples, "batch_size": opts.batch_size, "seed": opts.seed,
+            "real_focus": opts.real_focus, "camera_from": cam_source,
+        },
+        "lens": {
+            "surfaces": lens.n_surfaces, "stop_index": p.stop_index,
+            "stop_diameter_mm": float(lens.aperture_diameter_mm[p.stop_index]),
+            "efl_mm": p.efl, "f_number": p.f_number,
+            "entrance_pupil_diameter_mm": p.entrance_pupil_diameter,
+        },
+        "focus": {
+            "focus_from_camera_mm": focus_mm, "object_distance_from_film_mm": object_d,
+            "film_distance_mm": film_d, "thick_lens_film_distance_mm": thick_d,
+            "rms_spot_mm": spot,
+        },
+        "film": dataclasses.asdict(film) | {"pixel_pitch_mm": film.pixel_pitch_mm},
+        "mm_per_unit": mm_per_unit,
+        "placement": placement.to_dict(),
+        "thin_lens": model.to_dict(),
+        "povray_camera": pov,
+        "model_error": model_error,
+        "povray": {"version": version, "render_width": rw, "render_height": rh,
+                   "drop_top_rows": drop},
+        "sink_centre": default_sink_centre(loc, fwd).tolist(),
+        "batches": batches,
+    }
+
+
+def _write_json(path: Path, obj) -> None:
+    write_text(path, json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n")
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o).__name__)
+
+
+def _sanitize(obj):
+    """JSON has no inf/NaN: write them as null."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _sanitize(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_sanitize(v) for v in obj]
+    return obj
+
+
+def read_plan(outdir: str | os.PathLike) -> dict:
+    path = Path(outdir) / "plan.json"
+    try:
+        plan = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise PovlensError(f"{path} does not exist",
+                           "run 'povlens convert SCENE --lens LENS --focus D -o OUTDIR' first"
+                           ) from None
+    except json.JSONDecodeError as e:
+        raise PovlensError(f"{path}: not valid JSON ({e.msg}, line {e.lineno})",
+                           "run 'povlens convert' again to rewrite it") from None
+    if plan.get("povlens_plan") != PLAN_VERSION:
+        raise PovlensError(f"{path} was written by another version of povlens",
+                           "run 'povlens convert' again")
+    return plan
+
+
+def _scene_include(plan: dict, outdir: Path) -> str:
+    return os.path.relpath(plan["inputs"]["scene"], outdir)
+
+
+def convert(opts: ConvertOptions) -> dict:
+    """Write OUTDIR (plan.json, wrappers, Makefile) and return the plan."""
+    out = Path(opts.outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    plan = make_plan(opts)
+    old = None
+    if (out / "plan.json").exists():
+        try:
+            old = read_plan(out)
+        except PovlensError:
+            old = None
+    if old is not None and old.get("inputs") != _sanitize(plan["inputs"]):
+        _invalidate_outputs(out)
+    scene_inc = _scene_include(plan, out)
+    cam = plan["povray_camera"]
+    write_text(out / "pinhole.pov", pinhole_wrapper(scene_inc, cam["location"], cam["direction"],
+                                                    cam["right"], cam["up"]))
+    write_text(out / "focal_blur.pov", focal_blur_wrapper(
+        scene_inc, cam["location"], cam["direction"], cam["right"], cam["up"],
+        aperture=cam["aperture"], focal_distance=cam["focal_distance"],
+        blur_samples=opts.samples))
+    if opts.method == "mesh":
+        (out / "samples").mkdir(exist_ok=True)
+        for b, _ in enumerate(plan["batches"]):
+            write_text(out / "samples" / f"batch_{b:03d}.pov", _batch_wrapper(plan, out, b))
+    write_text(out / "Makefile", _makefile(plan))
+    if old is None or old != _sanitize(plan):
+        _write_json(out / "plan.json", _sanitize(plan))
+    return plan
+
+
+def _invalidate_outputs(out: Path) -> None:
+    """Inputs changed: earlier samples and images no longer belong to this plan."""
+    for pattern in ("samples/*.exr", "samples/*.done", "samples/*.inc", "image.exr", "image.png",
+                    "pupil.npz", "view-*.exr"):
+        for f in out.glob(pattern):
+            f.unlink()
+
+
+def _batch_wrapper(plan: dict, out: Path, batch: int) -> str:
+    """Animation wrapper: frame k includes sample k's mesh (and its translate)."""
+    scene = os.path.relpath(plan["inputs"]["scene"], out / "samples")
+    sink = plan["sink_centre"]
+    return (
+        "// Generated by povlens: lens samples of one batch as animation frames;\n"
+        "// frame k renders sample k through its ray mesh.  Rewritten on every run.\n"
+        "#version 3.7;\n"
+        f"#include \"{scene}\"\n"
+        f"sphere {{ <{sink[0]:.17g}, {sink[1]:.17g}, {sink[2]:.17g}>, 1\n"
+        "  pigment { rgb 0 }\n"
+        "  finish { ambient 0 diffuse 0 specular 0 phong 0 reflection 0 emission 0 }\n"
+        "  no_shadow no_reflection no_radiosity\n}\n"
+        "#include concat(\"sample_\", str(frame_number, -4, 0), \".inc\")\n"
+        "#version 3.7;\n"
+        "camera { mesh_camera { 1 0 mesh { PovlensRays translate PovlensTranslate } } }\n")
+
+
+def _makefile(plan: dict) -> str:
+    povlens = f"{shlex.quote(sys.executable)} -m povlens"
+    method = plan["inputs"]["method"]
+    lines = [
+        "# Generated by povlens convert: renders this folder's plan.",
+        "#   make -j2        render and composite image.exr and image.png",
+        "# A second make does nothing; 'povlens convert' again re-plans.",
+        f"POVLENS ?= {povlens}",
+        "",
+        ".PHONY: all",
+        "all: image.png",
+        "",
+    ]
+    if method == "mesh":
+        dones = " ".join(f"samples/batch_{b:03d}.done" for b in range(len(plan["batches"])))
+        lines += [
+            f"image.png: {dones}",
+            "\t$(POVLENS) composite .",
+            "",
+            "samples/batch_%.done: plan.json",
+            "\t$(POVLENS) render-batch . $*",
+            "",
+        ]
+    else:
+        view = "pinhole" if method == "pinhole" else "focal-blur"
+        lines += [
+            f"image.png: plan.json {view.replace('-', '_')}.pov",
+            f"\t$(POVLENS) render-view . --view {view}",
+            "",
+        ]
+    return "\n".join(lines)

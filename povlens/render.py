@@ -1,0 +1,284 @@
+"""Rendering a converted folder: lens-sample batches, single views, compositing.
+
+Work units and their outputs (each written under a temporary name, then renamed,
+so an interrupted run never leaves a half-written file at a final name):
+
+* batch b of the mesh method -> ``samples/sample_KKKK.exr`` (POV-Ray, linear),
+  ``samples/sample_KKKK.weight.exr`` (per-pixel radiometric weights, float32),
+  then the marker ``samples/batch_BBB.done``.  The ray meshes
+  (``sample_KKKK.inc``) are built just before the batch renders and deleted
+  after it, so disk use stays at one batch of meshes per running job.
+* a view (``pinhole`` / ``focal-blur``) -> ``view-<name>.exr``.
+* composite -> ``image.exr`` (linear float) and ``image.png`` (sRGB preview).
+
+Re-running skips every unit whose outputs exist: that is how an interrupted
+render resumes.
+
+Compositing of lens samples (Monte-Carlo estimate of the camera measurement,
+realistic-camera.md §5.4): for pixel p and samples k = 1..N with weights
+w_k(p) = cos^4(theta) / (z^2 pdf) (0 when blocked),
+
+    image(p) = exposure * (1/N) sum_k w_k(p) I_k(p),
+
+where ``exposure`` = 1 / (E/L at the film centre) makes the frame centre as
+bright as the pinhole render, and vignetting shows as it would on film.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .convert import ConvertOptions, convert, read_plan
+from .errors import PovlensError, PovrayError
+from .film import Film
+from .images import read_image, write_exr, write_png_srgb
+from .lens_camera import ScenePlacement, sample_points, sample_rays
+from .mesh_camera import write_ray_mesh, write_text
+from .paraxial import stopped_down
+from .povray import find_povray, render as povray_render
+from .prescription import read_lens
+
+__all__ = ["render_batch", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
+           "lens_for"]
+
+
+def lens_for(plan: dict):
+    inp = plan["inputs"]
+    lens = stopped_down(read_lens(inp["lens"]), stop_diameter_mm=inp["stop_diameter_mm"],
+                        f_number=inp["f_number"])
+    if lens.sha256() != inp["lens_sha256"]:
+        raise PovlensError(f"the lens file {inp['lens']} changed since 'povlens convert'",
+                           "run 'povlens convert' again")
+    return lens
+
+
+def film_for(plan: dict) -> Film:
+    f = plan["film"]
+    return Film(f["width_mm"], f["height_mm"], f["width_px"], f["height_px"])
+
+
+def pupil_table_for(outdir: Path, plan: dict, lens):
+    """The exit-pupil table of this plan, from ``pupil.npz`` if it is current."""
+    from .pupil import build_pupil_table, load_if_current
+    path = Path(outdir) / "pupil.npz"
+    film = film_for(plan)
+    fd = plan["focus"]["film_distance_mm"]
+    table = load_if_current(path, lens, fd, film.half_diagonal_mm) if path.exists() else None
+    if table is None:
+        table = build_pupil_table(lens, fd, film.half_diagonal_mm)
+        table.save(path)
+    return table
+
+
+def _exposure(outdir: Path, plan: dict, lens, table) -> float:
+    """1 / (E/L)(0), cached in ``exposure.txt`` beside the table."""
+    path = Path(outdir) / "exposure.txt"
+    if path.exists():
+        try:
+            return float(path.read_text())
+        except ValueError:
+            pass
+    from .sampling import exposure_normalisation
+    e = exposure_normalisation(table, lens, plan["focus"]["film_distance_mm"])
+    write_text(path, f"{e!r}\n")
+    return e
+
+
+def _sample_paths(outdir: Path, k: int) -> tuple[Path, Path, Path]:
+    s = Path(outdir) / "samples"
+    return s / f"sample_{k:04d}.exr", s / f"sample_{k:04d}.weight.exr", s / f"sample_{k:04d}.inc"
+
+
+def _write_mesh(plan: dict, lens, table, outdir: Path, k: int) -> None:
+    film = film_for(plan)
+    pl = plan["placement"]
+    placement = ScenePlacement(np.array(pl["film_centre"]), np.array(pl["right"]),
+                               np.array(pl["up"]), np.array(pl["forward"]), pl["mm_per_unit"])
+    inp = plan["inputs"]
+    points = sample_points(inp["samples"], film.height_px, film.width_px, inp["seed"])(k)
+    rays = sample_rays(lens, plan["focus"]["film_distance_mm"], film, table, placement, points)
+    exr, weight_path, inc = _sample_paths(outdir, k)
+    part = inc.with_name(inc.name + ".part")
+    t = write_ray_mesh(part, "PovlensRays", rays.origin, rays.direction, rays.valid,
+                       sink_centre=plan["sink_centre"])
+    with open(part, "a") as f:
+        f.write(f"#declare PovlensTranslate = <{t[0]:.17g}, {t[1]:.17g}, {t[2]:.17g}>;\n")
+    os.replace(part, inc)
+    write_exr(weight_path, rays.weight[..., None].astype(np.float32))
+
+
+def _render_frames(plan: dict, outdir: Path, batch: int, frames: list[int]) -> None:
+    """Render the animation frames ``frames`` of batch ``batch`` into sample EXRs."""
+    pv = plan["povray"]
+    samples = Path(outdir) / "samples"
+    pov = samples / f"batch_{batch:03d}.pov"
+    scene_dir = str(Path(plan["inputs"]["scene"]).parent)
+    with tempfile.TemporaryDirectory(prefix=f".batch_{batch:03d}.", dir=samples) as tmp:
+        log = Path(tmp) / "fatal.log"  # POV-Ray wants it beside the images
+        rel = os.path.relpath(tmp, samples)
+        cmd = [find_povray(), "-D", "-V", "-GR", "-GS", f"+I{pov.name}",
+               f"+O{rel}/f.exr", "+FE",
+               f"+W{pv['render_width']}", f"+H{pv['render_height']}", "-A", "+WT1",
+               f"+KFI{frames[0]}", f"+KFF{frames[-1]}", f"+L{scene_dir}"]
+        if pv["drop_top_rows"]:
+            cmd.append(f"+SR{pv['drop_top_rows'] + 1}")
+        proc = subprocess.run(cmd, cwd=samples, stdin=subprocess.DEVNULL, capture_output=True,
+                              text=True, errors="replace")
+        if proc.returncode != 0:
+            from .povray import _error_text
+            log_text = log.read_text(errors="replace") if log.exists() else ""
+            raise PovrayError(f"POV-Ray failed on {pov} (exit status {proc.returncode}):\n"
+                              + _error_text(proc.stderr, log_text),
+                              "fix the scene, or run 'make' in the folder to see the command")
+        found = {}
+        for f in Path(tmp).iterdir():
+            m = re.fullmatch(r"f(\d+)\.exr", f.name)
+            if m:
+                found[int(m.group(1))] = f
+        missing = [k for k in frames if k not in found]
+        if missing:
+            raise PovrayError(f"POV-Ray rendered batch {batch} but wrote no image for samples "
+                              f"{missing}", "check free disk space and POV-Ray's permitted paths")
+        for k in frames:
+            os.replace(found[k], _sample_paths(outdir, k)[0])
+
+
+def render_batch(outdir: str | os.PathLike, batch: int) -> list[int]:
+    """Render batch ``batch`` of a mesh plan; returns the samples it rendered (resumes)."""
+    outdir = Path(outdir)
+    plan = read_plan(outdir)
+    if plan["inputs"]["method"] != "mesh":
+        raise PovlensError(f"{outdir} was converted with --method {plan['inputs']['method']}; "
+                           f"it has no sample batches", "use 'povlens render-view'")
+    batches = plan["batches"]
+    if not 0 <= batch < len(batches):
+        raise PovlensError(f"batch {batch}: {outdir} has batches 0..{len(batches) - 1}")
+    done = outdir / "samples" / f"batch_{batch:03d}.done"
+    todo = [k for k in batches[batch]
+            if not all(p.exists() for p in _sample_paths(outdir, k)[:2])]
+    if todo:
+        lens = lens_for(plan)
+        table = pupil_table_for(outdir, plan, lens)
+        _exposure(outdir, plan, lens, table)
+        try:
+            for k in todo:
+                _write_mesh(plan, lens, table, outdir, k)
+            # Frames must be consecutive: render runs of consecutive samples.
+            runs, run = [], [todo[0]]
+            for k in todo[1:]:
+                if k == run[-1] + 1:
+                    run.append(k)
+                else:
+                    runs.append(run)
+                    run = [k]
+            runs.append(run)
+            for r in runs:
+                _render_frames(plan, outdir, batch, r)
+        finally:
+            for k in todo:
+                _sample_paths(outdir, k)[2].unlink(missing_ok=True)
+    write_text(done, "".join(f"{k}\n" for k in batches[batch]))
+    return todo
+
+
+def render_view(outdir: str | os.PathLike, view: str) -> Path:
+    """Render ``pinhole`` or ``focal-blur`` of a converted folder to ``view-<view>.exr``."""
+    outdir = Path(outdir)
+    plan = read_plan(outdir)
+    film = film_for(plan)
+    name = {"pinhole": "pinhole.pov", "focal-blur": "focal_blur.pov"}.get(view)
+    if name is None:
+        raise PovlensError(f"--view {view}: unknown view", "use pinhole or focal-blur")
+    out = outdir / f"view-{view}.exr"
+    if not out.exists():
+        povray_render(outdir / name, out, film.width_px, film.height_px,
+                      threads=os.cpu_count() or 1,
+                      library_paths=[Path(plan["inputs"]["scene"]).parent])
+    if plan["inputs"]["method"] == view.replace("_", "-"):
+        _finish_image(outdir, read_image(out)[..., :3])
+    return out
+
+
+def _finish_image(outdir: Path, image: np.ndarray) -> None:
+    write_exr(outdir / "image.exr", image.astype(np.float32))
+    write_png_srgb(outdir / "image.png", np.clip(image, 0.0, None))
+
+
+def composite_outdir(outdir: str | os.PathLike) -> np.ndarray:
+    """Combine the rendered samples of a mesh plan into image.exr and image.png."""
+    outdir = Path(outdir)
+    plan = read_plan(outdir)
+    n = plan["inputs"]["samples"]
+    drop = plan["povray"]["drop_top_rows"]
+    missing = [k for k in range(n) if not all(p.exists() for p in _sample_paths(outdir, k)[:2])]
+    if missing:
+        raise PovlensError(f"{outdir}: samples {missing[:8]}{'...' if len(missing) > 8 else ''} "
+                           f"are not rendered yet", "run 'povlens render' or 'make' in the folder")
+    lens = lens_for(plan)
+    table = pupil_table_for(outdir, plan, lens)
+    exposure = _exposure(outdir, plan, lens, table)
+    total = None
+    for k in range(n):
+        exr, wpath, _ = _sample_paths(outdir, k)
+        img = read_image(exr)[drop:, :, :3].astype(np.float64)
+        w = read_image(wpath)[..., 0].astype(np.float64)
+        if img.shape[:2] != w.shape:
+            raise PovlensError(f"{exr}: size {img.shape[:2]} does not match its weights {w.shape}",
+                               "delete the folder's samples and render again")
+        contrib = img * w[..., None]
+        total = contrib if total is None else total + contrib
+    image = total * (exposure / n)
+    _finish_image(outdir, image.astype(np.float32))
+    return image
+
+
+def _progress(total: int, desc: str, quiet: bool):
+    from tqdm import tqdm
+    return tqdm(total=total, desc=desc, unit="batch", disable=quiet or not sys.stderr.isatty(),
+                file=sys.stderr)
+
+
+def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: bool = False) -> Path:
+    """Render everything a converted folder needs, in parallel, and composite."""
+    outdir = Path(outdir)
+    plan = read_plan(outdir)
+    method = plan["inputs"]["method"]
+    if method != "mesh":
+        render_view(outdir, method)
+        return outdir / "image.exr"
+    jobs = jobs or os.cpu_count() or 1
+    todo = [b for b in range(len(plan["batches"]))
+            if not (outdir / "samples" / f"batch_{b:03d}.done").exists()]
+    if todo:
+        lens = lens_for(plan)
+        table = pupil_table_for(outdir, plan, lens)  # build once, before the workers start
+        _exposure(outdir, plan, lens, table)
+        with _progress(len(todo), "lens samples", quiet) as bar:
+            if jobs == 1:
+                for b in todo:
+                    render_batch(outdir, b)
+                    bar.update(1)
+            else:
+                with cf.ProcessPoolExecutor(max_workers=jobs) as pool:
+                    futures = [pool.submit(render_batch, outdir, b) for b in todo]
+                    try:
+                        for fut in cf.as_completed(futures):
+                            fut.result()
+                            bar.update(1)
+                    except BaseException:
+                        for fut in futures:
+                            fut.cancel()
+                        raise
+    composite_outdir(outdir)
+    return outdir / "image.exr"
