@@ -1,0 +1,370 @@
+"""Running POV-Ray: finding the executable, its version, and one render.
+
+Everything here follows the measured behaviour of POV-Ray 3.7.0.10 described
+in ``/work/shared/reference/povray-mesh-camera.md`` (§10):
+
+* ``-D`` is required (Debian's ``povray.ini`` sets ``Display=On``);
+  ``-V -GR -GS`` leave only warnings and errors on stderr (plus a banner);
+* exit code 0 on success (also with warnings), 1 on a parse error or a
+  missing input file;
+* a failed render deletes or truncates the output file, so :func:`render`
+  always writes to a temporary name next to the final file and renames it
+  only on success;
+* the fatal-error log (``+GF``) must be given as a bare file name; POV-Ray
+  writes it into the image's folder and refuses any name with a folder part
+  ("Stream output files must reside in same directory as image output file");
+* ``+SR``/``+ER``/``+SC``/``+EC`` values in (0, 1] are fractions of the image,
+  so "+ER1" means the whole height; :func:`render` takes 0-based pixel
+  ranges and writes them unambiguously;
+* POV-Ray resolves ``#include`` and image-map file names relative to its
+  working directory and its library paths (``+L``), *not* relative to the
+  file that contains the ``#include``.  :func:`render` runs in the folder of
+  the ``.pov`` file; pass the folders of included scenes as
+  ``library_paths``.
+
+The executable is ``$POVLENS_POVRAY`` if that is set, else ``povray`` on
+``PATH``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import uuid
+from pathlib import Path
+from typing import Iterable, Iterator, Sequence
+
+from .errors import PovrayError, UsageError
+
+__all__ = [
+    "ENV_VAR",
+    "find_povray",
+    "povray_version",
+    "needs_row_workaround",
+    "render",
+    "temporary_path",
+    "atomic_output",
+]
+
+#: Environment variable that overrides which POV-Ray executable is used.
+ENV_VAR = "POVLENS_POVRAY"
+
+#: Output file suffix -> POV-Ray output-format switch.
+_FORMATS = {".exr": "+FE", ".png": "+FN", ".hdr": "+FH", ".tga": "+FT", ".ppm": "+FP"}
+
+#: Lines of POV-Ray's start-up banner and progress output that carry no
+#: information about a failure.
+_NOISE = re.compile(
+    r"^(povray: cannot open the user configuration file|==== \[|POV-Ray finished)"
+)
+
+
+# ---------------------------------------------------------------------------
+# atomic file output (shared by images.py and mesh_camera.py)
+
+
+def temporary_path(final: str | os.PathLike) -> Path:
+    """A fresh temporary file name in the folder of ``final``, same suffix.
+
+    The suffix is kept so that tools that pick a format from the file name
+    (POV-Ray, OpenImageIO) write the right format.  The file is not created
+    (so it gets ordinary permissions when it is written).
+    """
+    final = Path(final)
+    return final.parent / f".{final.stem}.{os.getpid()}-{uuid.uuid4().hex[:12]}.tmp{final.suffix}"
+
+
+@contextlib.contextmanager
+def atomic_output(final: str | os.PathLike) -> Iterator[Path]:
+    """Context manager: yields a temporary path; renames it to ``final`` on success.
+
+    On an exception the temporary file is removed and ``final`` is left as it
+    was, so a half-written file never appears under the final name.
+    """
+    final = Path(final)
+    if not final.parent.is_dir():
+        raise UsageError(
+            f"cannot write {final}: folder {final.parent} does not exist",
+            "create the folder or choose another output path",
+        )
+    tmp = temporary_path(final)
+    try:
+        yield tmp
+        os.replace(tmp, final)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+# ---------------------------------------------------------------------------
+# the executable and its version
+
+
+def find_povray() -> str:
+    """Absolute path of the POV-Ray executable, or :class:`PovrayError`.
+
+    ``$POVLENS_POVRAY`` (a path or a command name) overrides ``povray`` on PATH.
+    """
+    override = os.environ.get(ENV_VAR)
+    if override:
+        found = shutil.which(override)
+        if found is None:
+            raise PovrayError(
+                f"{ENV_VAR}={override!r} is not an executable POV-Ray program",
+                f"point {ENV_VAR} to the povray executable, or unset it to use "
+                "'povray' from PATH",
+            )
+        return os.path.abspath(found)
+    found = shutil.which("povray")
+    if found is None:
+        raise PovrayError(
+            "POV-Ray (the 'povray' program) was not found on PATH",
+            "install it (Debian/Ubuntu: apt-get install povray) or set "
+            f"{ENV_VAR} to the povray executable",
+        )
+    return os.path.abspath(found)
+
+
+@functools.lru_cache(maxsize=None)
+def _version_of(executable: str) -> str:
+    try:
+        proc = subprocess.run(
+            [executable, "--version"],
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            text=True,
+            errors="replace",
+            timeout=60,
+        )
+    except OSError as exc:
+        raise PovrayError(
+            f"cannot run POV-Ray at {executable}: {exc.strerror or exc}",
+            f"check the installation or set {ENV_VAR} to a working povray",
+        ) from None
+    except subprocess.TimeoutExpired:
+        raise PovrayError(
+            f"'{executable} --version' did not finish within 60 s",
+            f"check the installation or set {ENV_VAR} to a working povray",
+        ) from None
+    text = proc.stdout + "\n" + proc.stderr
+    m = re.search(r"POV-Ray\s+(?:v(?:ersion)?\s*)?(\d+(?:\.\d+)+)", text)
+    if m is None:
+        raise PovrayError(
+            f"'{executable} --version' did not report a POV-Ray version; it printed:\n"
+            + _tail(text),
+            f"set {ENV_VAR} to the povray executable",
+        )
+    return m.group(1)
+
+
+def povray_version(executable: str | None = None) -> str:
+    """POV-Ray's version number, e.g. ``"3.7.0.10"`` (cached per executable)."""
+    return _version_of(executable or find_povray())
+
+
+def needs_row_workaround(version: str) -> bool:
+    """True for POV-Ray 3.7.0.x, whose mesh_camera repeats the first face row.
+
+    (FS#254, fixed in 3.7.1/3.8.)  Such versions need a ``W x (H+1)`` render
+    whose top output row is dropped; see :func:`povlens.mesh_camera.render_size`.
+    """
+    parts = version.split(".")
+    return parts[:3] == ["3", "7", "0"]
+
+
+# ---------------------------------------------------------------------------
+# rendering
+
+
+def _tail(text: str, lines: int = 25) -> str:
+    kept = [ln for ln in text.splitlines() if ln.strip()]
+    return "\n".join(kept[-lines:])
+
+
+def _strip_banner(lines: list[str]) -> list[str]:
+    """Drop POV-Ray's start-up banner (everything up to the library list)."""
+    start = next((i for i, ln in enumerate(lines) if ln.startswith("==== [")), None)
+    if start is not None:
+        return lines[start:]
+    hdr = next((i for i, ln in enumerate(lines) if ln.startswith("Support libraries used by")), None)
+    if hdr is None:
+        return lines
+    i = hdr + 1
+    while i < len(lines) and (lines[i].startswith(" ") or not lines[i].strip()):
+        i += 1
+    return lines[i:]
+
+
+def _error_text(stderr: str, log_text: str) -> str:
+    """POV-Ray's own description of a failure, without the start-up banner."""
+    body = _strip_banner(stderr.splitlines())
+    body = [ln for ln in body if ln.strip() and not _NOISE.match(ln)]
+    parts = []
+    if log_text.strip():
+        parts.append(log_text.strip())
+    if body:
+        stderr_text = "\n".join(dict.fromkeys(body[-25:]))  # drop repeated lines
+        if stderr_text not in log_text:
+            parts.append(stderr_text)
+    if not parts:
+        parts.append(_tail(stderr) or "(POV-Ray printed nothing)")
+    return "\n".join(parts)
+
+
+def _span_args(
+    start: int | None, end: int | None, size: int, start_flag: str, end_flag: str, what: str
+) -> list[str]:
+    """POV-Ray +S?/+E? switches for the 0-based half-open span [start, end).
+
+    POV-Ray counts from 1 and reads values in (0, 1] as fractions of the
+    image, so "+ER1" would mean the whole image; an end of 1 is therefore
+    written as the fraction 1.5/size, which POV-Ray truncates to row 1.
+    """
+    s = 0 if start is None else int(start)
+    e = size if end is None else int(end)
+    if not (0 <= s < e <= size):
+        raise UsageError(
+            f"bad {what} range [{start}, {end}) for an image {size} pixels wide/high",
+            f"use 0 <= start_{what} < end_{what} <= {size}",
+        )
+    args = []
+    if s > 0:
+        args.append(f"{start_flag}{s + 1}")  # >= 2: always read as a pixel number
+    if e < size:
+        args.append(f"{end_flag}{e}" if e >= 2 else f"{end_flag}{1.5 / size:.9f}")
+    return args
+
+
+def render(
+    pov_path: str | os.PathLike,
+    out_path: str | os.PathLike,
+    width: int,
+    height: int,
+    *,
+    extra_args: Sequence[str] = (),
+    threads: int = 1,
+    cwd: str | os.PathLike | None = None,
+    start_row: int | None = None,
+    end_row: int | None = None,
+    start_col: int | None = None,
+    end_col: int | None = None,
+    library_paths: Iterable[str | os.PathLike] = (),
+    timeout: float | None = None,
+) -> Path:
+    """Render ``pov_path`` to ``out_path`` (``width`` x ``height`` pixels).
+
+    Runs ``povray -D -V -GR -GS +I<pov> +O<tmp> +F? +W +H -A +WT<threads>
+    [+SR +ER +SC +EC] [+L...] [extra_args]`` with the working directory set to
+    the folder of ``pov_path`` (or ``cwd``).  The output format follows the
+    suffix of ``out_path`` (``.exr`` -> OpenEXR, linear half float; also
+    ``.png``, ``.hdr``, ``.tga``, ``.ppm``).  Anti-aliasing is off (``-A``);
+    ``extra_args`` come last and may override it.
+
+    ``start_row``/``end_row`` and ``start_col``/``end_col`` select a
+    sub-rectangle as 0-based half-open pixel ranges (row 0 = top); the output
+    file still has the full ``width`` x ``height`` size and untraced pixels
+    are black.
+
+    The image is written to a temporary name in the folder of ``out_path`` and
+    renamed on success; on failure ``out_path`` is not touched.  Returns
+    ``out_path`` as a :class:`Path`.
+
+    Raises :class:`PovrayError` (carrying POV-Ray's own error text) if POV-Ray
+    is missing or exits with a non-zero status, :class:`UsageError` for bad
+    arguments.
+    """
+    pov_path = Path(pov_path).resolve()
+    out_path = Path(out_path).absolute()
+    if not pov_path.is_file():
+        raise UsageError(f"scene file {pov_path} does not exist", "check the path")
+    fmt = _FORMATS.get(out_path.suffix.lower())
+    if fmt is None:
+        raise UsageError(
+            f"cannot render to {out_path}: unknown image suffix {out_path.suffix!r}",
+            "use one of " + ", ".join(sorted(_FORMATS)),
+        )
+    width, height, threads = int(width), int(height), int(threads)
+    if width < 1 or height < 1:
+        raise UsageError(f"bad image size {width}x{height}", "width and height must be >= 1")
+    if threads < 1:
+        raise UsageError(f"bad thread count {threads}", "use threads >= 1")
+    spans = _span_args(start_row, end_row, height, "+SR", "+ER", "row")
+    spans += _span_args(start_col, end_col, width, "+SC", "+EC", "col")
+
+    executable = find_povray()
+    workdir = Path(cwd).absolute() if cwd is not None else pov_path.parent
+    with contextlib.ExitStack() as stack:
+        tmp = stack.enter_context(atomic_output(out_path))
+        # POV-Ray 3.7 takes the fatal-error log ("stream") file as a bare name
+        # and writes it into the image's folder ("Stream output files must
+        # reside in same directory as image output file" otherwise).
+        log = tmp.parent / f".povlens-{os.getpid()}-{uuid.uuid4().hex[:12]}.log"
+        stack.callback(lambda: log.unlink(missing_ok=True))
+        # Relative names where possible: POV-Ray's I/O restrictions permit the
+        # working directory.
+        inp = os.path.relpath(pov_path, workdir) if _inside(pov_path, workdir) else str(pov_path)
+        outp = os.path.relpath(tmp, workdir) if _inside(tmp, workdir) else str(tmp)
+        cmd = [
+            executable, "-D", "-V", "-GR", "-GS", f"+GF{log.name}",
+            f"+I{inp}", f"+O{outp}", fmt, f"+W{width}", f"+H{height}", "-A", f"+WT{threads}",
+            *spans,
+            *(f"+L{Path(p).absolute()}" for p in library_paths),
+            *extra_args,
+        ]  # fmt: skip
+        try:
+            proc = subprocess.run(
+                cmd,
+                cwd=workdir,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+                errors="replace",
+                timeout=timeout,
+            )
+        except FileNotFoundError:
+            raise PovrayError(
+                f"POV-Ray at {executable} could not be started",
+                f"check the installation or set {ENV_VAR} to a working povray",
+            ) from None
+        except OSError as exc:
+            raise PovrayError(
+                f"cannot run POV-Ray ({executable}) in {workdir}: {exc.strerror or exc}",
+                "check that the folder exists and the program is executable",
+            ) from None
+        except subprocess.TimeoutExpired:
+            raise PovrayError(
+                f"POV-Ray did not finish rendering {pov_path} within {timeout} s",
+                "render a smaller image, or raise the time limit",
+            ) from None
+        log_text = log.read_text(errors="replace") if log.exists() else ""
+        if proc.returncode != 0:
+            raise PovrayError(
+                f"POV-Ray failed on {pov_path} (exit status {proc.returncode}):\n"
+                + _error_text(proc.stderr, log_text)
+                + f"\n(command, run in {workdir}: {shlex.join(cmd)})",
+                "fix the scene file named above, or run the command by hand "
+                "to see POV-Ray's whole output",
+            )
+        if not tmp.exists() or tmp.stat().st_size == 0:
+            raise PovrayError(
+                f"POV-Ray reported success on {pov_path} but wrote no image:\n"
+                + _error_text(proc.stderr, log_text),
+                "check that the output folder is writable by POV-Ray "
+                "(see /etc/povray/3.7/povray.conf, [Permitted Paths])",
+            )
+    return out_path
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    try:
+        Path(path).resolve().relative_to(Path(folder).resolve())
+        return True
+    except ValueError:
+        return False

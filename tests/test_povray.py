@@ -1,0 +1,141 @@
+"""povlens.povray against the real POV-Ray (small images)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from povlens import povray
+from povlens.errors import PovrayError, UsageError
+from povlens.images import read_image
+
+pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray is not installed")
+
+FLAT = """#version 3.7;
+global_settings { assumed_gamma 1.0 }
+camera { location <0, 0, -3> look_at 0 }
+plane { -z, 0 pigment { rgb 0.5 } finish { ambient 1 diffuse 0 } }
+"""
+
+
+@pytest.fixture
+def flat_scene(tmp_path):
+    p = tmp_path / "flat.pov"
+    p.write_text(FLAT)
+    return p
+
+
+def _leftovers(folder):
+    return sorted(p.name for p in folder.iterdir() if ".tmp" in p.name or p.suffix == ".log")
+
+
+def test_version_and_row_workaround():
+    v = povray.povray_version()
+    assert re.fullmatch(r"\d+(\.\d+)+", v)
+    assert povray.povray_version() is v  # cached
+    assert povray.needs_row_workaround("3.7.0.10")
+    assert povray.needs_row_workaround("3.7.0")
+    assert not povray.needs_row_workaround("3.7.1")
+    assert not povray.needs_row_workaround("3.8.0")
+
+
+def test_render_exr(flat_scene, tmp_path):
+    out = tmp_path / "out" / "flat.exr"
+    out.parent.mkdir()
+    assert povray.render(flat_scene, out, 16, 12) == out
+    img = read_image(out)
+    assert img.shape == (12, 16, 3)
+    np.testing.assert_allclose(img, 0.5, atol=1e-3)
+    assert _leftovers(tmp_path) == [] and _leftovers(out.parent) == []
+
+
+@pytest.mark.parametrize(
+    "rows, cols",
+    [((1, 3), (None, None)), ((0, 1), (2, 5)), ((11, 12), (15, 16)), ((None, None), (0, 1))],
+)
+def test_render_subrectangle(flat_scene, tmp_path, rows, cols):
+    out = tmp_path / "sub.exr"
+    povray.render(flat_scene, out, 16, 12, start_row=rows[0], end_row=rows[1],
+                  start_col=cols[0], end_col=cols[1])  # fmt: skip
+    img = read_image(out)[:, :, 0]
+    expect = np.zeros((12, 16), bool)
+    expect[slice(*rows), slice(*cols)] = True
+    np.testing.assert_array_equal(img > 0.25, expect)
+
+
+def test_bad_subrectangle(flat_scene, tmp_path):
+    with pytest.raises(UsageError, match="row"):
+        povray.render(flat_scene, tmp_path / "x.exr", 16, 12, start_row=5, end_row=5)
+    with pytest.raises(UsageError, match="col"):
+        povray.render(flat_scene, tmp_path / "x.exr", 16, 12, end_col=17)
+
+
+def test_parse_error_carries_povray_message(tmp_path):
+    bad = tmp_path / "bad.pov"
+    bad.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 }\nlightsource { <1,1,1> rgb 1 }\n")
+    out = tmp_path / "bad.exr"
+    out.write_bytes(b"previous image")
+    with pytest.raises(PovrayError) as info:
+        povray.render(bad, out, 8, 6)
+    msg = str(info.value)
+    assert "bad.pov" in msg
+    assert "Parse Error" in msg and "lightsource" in msg
+    assert "Persistence of Vision" not in msg  # banner removed
+    assert out.read_bytes() == b"previous image"  # never half-written
+    assert _leftovers(tmp_path) == []
+
+
+def test_missing_include_message(tmp_path):
+    bad = tmp_path / "inc.pov"
+    bad.write_text('#version 3.7;\n#include "no_such_file.inc"\n')
+    with pytest.raises(PovrayError, match="no_such_file.inc"):
+        povray.render(bad, tmp_path / "inc.exr", 8, 6)
+
+
+def test_missing_povray(monkeypatch, flat_scene, tmp_path):
+    monkeypatch.setenv(povray.ENV_VAR, str(tmp_path / "nowhere" / "povray"))
+    with pytest.raises(PovrayError) as info:
+        povray.render(flat_scene, tmp_path / "x.exr", 8, 6)
+    assert povray.ENV_VAR in str(info.value)
+    assert info.value.hint and "povray" in info.value.hint
+    with pytest.raises(PovrayError, match=povray.ENV_VAR):
+        povray.povray_version()
+
+
+def test_missing_povray_on_path(monkeypatch, flat_scene, tmp_path):
+    monkeypatch.delenv(povray.ENV_VAR, raising=False)
+    monkeypatch.setenv("PATH", str(tmp_path))
+    with pytest.raises(PovrayError, match="not found"):
+        povray.render(flat_scene, tmp_path / "x.exr", 8, 6)
+
+
+def test_usage_errors(flat_scene, tmp_path):
+    with pytest.raises(UsageError, match="suffix"):
+        povray.render(flat_scene, tmp_path / "x.jpg", 8, 6)
+    with pytest.raises(UsageError, match="does not exist"):
+        povray.render(tmp_path / "nope.pov", tmp_path / "x.exr", 8, 6)
+    with pytest.raises(UsageError, match="folder"):
+        povray.render(flat_scene, tmp_path / "no_dir" / "x.exr", 8, 6)
+
+
+def test_library_paths_resolve_scene_includes(tmp_path):
+    """POV-Ray resolves #include relative to its cwd/library paths only."""
+    scene_dir = tmp_path / "scene"
+    work = tmp_path / "work"
+    scene_dir.mkdir()
+    work.mkdir()
+    (scene_dir / "colour.inc").write_text("#declare Col = rgb <0.25, 0.5, 0.75>;\n")
+    (scene_dir / "s.pov").write_text(
+        FLAT.replace("pigment { rgb 0.5 }", "pigment { Col }").replace(
+            "camera", '#include "colour.inc"\ncamera'
+        )
+    )
+    wrapper = work / "w.pov"
+    wrapper.write_text(f'#version 3.7;\n#include "{scene_dir / "s.pov"}"\n')
+    with pytest.raises(PovrayError, match="colour.inc"):
+        povray.render(wrapper, work / "w.exr", 8, 6)
+    povray.render(wrapper, work / "w.exr", 8, 6, library_paths=[scene_dir])
+    np.testing.assert_allclose(read_image(work / "w.exr")[3, 4], [0.25, 0.5, 0.75], atol=1e-3)
