@@ -73,6 +73,8 @@ class ConvertOptions:
     look_at: tuple[float, float, float] | None = None
     sky: tuple[float, float, float] = (0.0, 1.0, 0.0)
     real_focus: bool = True            # film at the real-ray focus (else thick lens)
+    vignetting: bool = True            # composite keeps the lens's vignetting
+    jitter: bool = True                # film points jittered within each pixel (box filter)
 
 
 def _unit(v) -> np.ndarray:
@@ -183,7 +185,9 @@ def make_plan(opts: ConvertOptions) -> dict:
             "film_diagonal_mm": opts.film_diagonal_mm, "film_size_mm": opts.film_size_mm,
             "width": opts.width, "height": opts.height, "method": opts.method,
             "samples": opts.samples, "batch_size": opts.batch_size, "seed": opts.seed,
-            "real_focus": opts.real_focus, "camera_from": cam_source,
+            "real_focus": opts.real_focus, "vignetting": opts.vignetting,
+            "jitter": opts.jitter,
+            "camera_from": cam_source,
         },
         "lens": {
             "surfaces": lens.n_surfaces, "stop_index": p.stop_index,
@@ -305,7 +309,10 @@ def _batch_wrapper(plan: dict, out: Path, batch: int) -> str:
         "  pigment { rgb 0 }\n"
         "  finish { ambient 0 diffuse 0 specular 0 phong 0 reflection 0 emission 0 }\n"
         "  no_shadow no_reflection no_radiosity\n}\n"
-        "#include concat(\"sample_\", str(frame_number, -4, 0), \".inc\")\n"
+        "// A one-frame run is not an animation (frame_number is 0): povlens then\n"
+        "// passes the sample as Declare=PovlensFrame=K.\n"
+        "#ifndef (PovlensFrame) #declare PovlensFrame = frame_number; #end\n"
+        "#include concat(\"sample_\", str(PovlensFrame, -4, 0), \".inc\")\n"
         "#version 3.7;\n"
         "camera { mesh_camera { 1 0 mesh { PovlensRays translate PovlensTranslate } } }\n")
 

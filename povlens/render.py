@@ -26,7 +26,6 @@ bright as the pinhole render, and vignetting shows as it would on film.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import contextlib
 import math
 import os
@@ -35,6 +34,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -107,6 +107,8 @@ def _write_mesh(plan: dict, lens, table, outdir: Path, k: int) -> None:
                                np.array(pl["up"]), np.array(pl["forward"]), pl["mm_per_unit"])
     inp = plan["inputs"]
     points = sample_points(inp["samples"], film.height_px, film.width_px, inp["seed"])(k)
+    if not inp.get("jitter", True):
+        points[..., :2] = 0.5  # pixel centres, as POV-Ray's perspective camera
     rays = sample_rays(lens, plan["focus"]["film_distance_mm"], film, table, placement, points)
     exr, weight_path, inc = _sample_paths(outdir, k)
     part = inc.with_name(inc.name + ".part")
@@ -130,7 +132,12 @@ def _render_frames(plan: dict, outdir: Path, batch: int, frames: list[int]) -> N
         cmd = [find_povray(), "-D", "-V", "-GR", "-GS", f"+I{pov.name}",
                f"+O{rel}/f.exr", "+FE",
                f"+W{pv['render_width']}", f"+H{pv['render_height']}", "-A", "+WT1",
-               f"+KFI{frames[0]}", f"+KFF{frames[-1]}", f"+L{scene_dir}"]
+               f"+L{scene_dir}"]
+        if len(frames) == 1:
+            cmd[cmd.index(f"+O{rel}/f.exr")] = f"+O{rel}/f{frames[0]}.exr"
+            cmd.append(f"Declare=PovlensFrame={frames[0]}")
+        else:
+            cmd += [f"+KFI{frames[0]}", f"+KFF{frames[-1]}"]
         if pv["drop_top_rows"]:
             cmd.append(f"+SR{pv['drop_top_rows'] + 1}")
         proc = subprocess.run(cmd, cwd=samples, stdin=subprocess.DEVNULL, capture_output=True,
@@ -215,10 +222,21 @@ def _finish_image(outdir: Path, image: np.ndarray) -> None:
     write_png_srgb(outdir / "image.png", np.clip(image, 0.0, None))
 
 
-def composite_outdir(outdir: str | os.PathLike) -> np.ndarray:
-    """Combine the rendered samples of a mesh plan into image.exr and image.png."""
+def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
+                     write: bool = True) -> np.ndarray:
+    """Combine the rendered samples of a mesh plan into image.exr and image.png.
+
+    With ``vignetting`` (the plan's setting when None) the image is the camera
+    measurement normalised at the frame centre, darker toward the corners as the
+    lens makes it.  Without, each pixel is divided by its own mean weight
+    (``sum w I / sum w``), which removes natural and mechanical vignetting and
+    leaves the lens's geometry and blur: comparable with POV-Ray's cameras.
+    Returns the (H, W, 3) float64 image; ``write=False`` only returns it.
+    """
     outdir = Path(outdir)
     plan = read_plan(outdir)
+    if vignetting is None:
+        vignetting = plan["inputs"].get("vignetting", True)
     n = plan["inputs"]["samples"]
     drop = plan["povray"]["drop_top_rows"]
     missing = [k for k in range(n) if not all(p.exists() for p in _sample_paths(outdir, k)[:2])]
@@ -229,6 +247,7 @@ def composite_outdir(outdir: str | os.PathLike) -> np.ndarray:
     table = pupil_table_for(outdir, plan, lens)
     exposure = _exposure(outdir, plan, lens, table)
     total = None
+    wsum = 0.0
     for k in range(n):
         exr, wpath, _ = _sample_paths(outdir, k)
         img = read_image(exr)[drop:, :, :3].astype(np.float64)
@@ -238,8 +257,14 @@ def composite_outdir(outdir: str | os.PathLike) -> np.ndarray:
                                "delete the folder's samples and render again")
         contrib = img * w[..., None]
         total = contrib if total is None else total + contrib
-    image = total * (exposure / n)
-    _finish_image(outdir, image.astype(np.float32))
+        wsum = wsum + w
+    if vignetting:
+        image = total * (exposure / n)
+    else:
+        image = np.where(wsum[..., None] > 0, total / np.where(wsum > 0, wsum, 1.0)[..., None],
+                         0.0)
+    if write:
+        _finish_image(outdir, image.astype(np.float32))
     return image
 
 
@@ -247,6 +272,50 @@ def _progress(total: int, desc: str, quiet: bool):
     from tqdm import tqdm
     return tqdm(total=total, desc=desc, unit="batch", disable=quiet or not sys.stderr.isatty(),
                 file=sys.stderr)
+
+
+def _run_batches_in_subprocesses(outdir: Path, batches: list[int], jobs: int, bar) -> None:
+    """Run ``povlens render-batch`` for each batch, ``jobs`` at a time.
+
+    Separate processes (as make runs them) rather than a fork-based pool: forking a
+    process whose image and BLAS libraries have started threads can deadlock.
+    """
+    procs: dict[int, subprocess.Popen] = {}
+    pending = list(batches)
+    failure = None
+    try:
+        while pending or procs:
+            while pending and len(procs) < jobs and failure is None:
+                b = pending.pop(0)
+                procs[b] = subprocess.Popen(
+                    [sys.executable, "-m", "povlens", "render-batch", str(outdir), str(b)],
+                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                    text=True, errors="replace")
+            if not procs:
+                break
+            finished = [b for b, p in procs.items() if p.poll() is not None]
+            if not finished:
+                time.sleep(0.05)
+                continue
+            for b in finished:
+                p = procs.pop(b)
+                err = p.stderr.read()
+                p.stderr.close()
+                if p.returncode != 0 and failure is None:
+                    failure = (b, p.returncode, err)
+                    pending.clear()
+                elif p.returncode == 0:
+                    bar.update(1)
+    finally:
+        for p in procs.values():  # interrupted: stop the running batches
+            p.terminate()
+        for p in procs.values():
+            p.wait()
+    if failure is not None:
+        b, code, err = failure
+        msg = err.strip().removeprefix("povlens render-batch: error: ")
+        cls = PovrayError if code == PovrayError.exit_code else PovlensError
+        raise cls(f"batch {b}: {msg}")
 
 
 def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: bool = False) -> Path:
@@ -258,8 +327,8 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
         render_view(outdir, method)
         return outdir / "image.exr"
     jobs = jobs or os.cpu_count() or 1
-    todo = [b for b in range(len(plan["batches"]))
-            if not (outdir / "samples" / f"batch_{b:03d}.done").exists()]
+    todo = [b for b, ks in enumerate(plan["batches"])
+            if not all(p.exists() for k in ks for p in _sample_paths(outdir, k)[:2])]
     if todo:
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)  # build once, before the workers start
@@ -270,15 +339,6 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
                     render_batch(outdir, b)
                     bar.update(1)
             else:
-                with cf.ProcessPoolExecutor(max_workers=jobs) as pool:
-                    futures = [pool.submit(render_batch, outdir, b) for b in todo]
-                    try:
-                        for fut in cf.as_completed(futures):
-                            fut.result()
-                            bar.update(1)
-                    except BaseException:
-                        for fut in futures:
-                            fut.cancel()
-                        raise
+                _run_batches_in_subprocesses(outdir, todo, jobs, bar)
     composite_outdir(outdir)
     return outdir / "image.exr"

@@ -53,6 +53,12 @@ def _add_convert_arguments(p) -> None:
                    help="camera sky vector (default 0,1,0)")
     p.add_argument("--thick-lens-focus", action="store_true",
                    help="place the film by the thick-lens equation, not the real-ray focus")
+    p.add_argument("--no-vignetting", action="store_true",
+                   help="composite without the lens's vignetting (each pixel divided by its "
+                        "mean sample weight), for comparison with POV-Ray's own cameras")
+    p.add_argument("--no-jitter", action="store_true",
+                   help="trace every pixel from its centre (no sub-pixel box filter), as "
+                        "POV-Ray's perspective camera without anti-aliasing does")
     p.add_argument("-o", "--outdir", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
 
@@ -72,7 +78,8 @@ def options_from_args(args) -> ConvertOptions:
         units=args.units, width=args.width, height=args.height, method=args.method,
         samples=args.samples, batch_size=args.batch_size, seed=args.seed,
         location=args.location, look_at=args.look_at, sky=args.sky,
-        real_focus=not args.thick_lens_focus)
+        real_focus=not args.thick_lens_focus, vignetting=not args.no_vignetting,
+        jitter=not args.no_jitter)
 
 
 def _summary(plan: dict) -> str:

@@ -1,0 +1,147 @@
+"""convert / render / composite on the bundled scenes with the real POV-Ray, small images."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from povlens.convert import ConvertOptions, convert
+from povlens.errors import PovrayError
+from povlens.images import read_image
+from povlens.render import composite_outdir, render_batch, render_outdir, render_view
+
+from conftest import ROOT
+
+SCENES = ROOT / "scenes"
+pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
+
+
+def povlens(*args, env=None, cwd=ROOT):
+    e = dict(os.environ)
+    e.update(env or {})
+    return subprocess.run([sys.executable, "-m", "povlens", *args], capture_output=True,
+                          text=True, cwd=cwd, env=e, timeout=600)
+
+
+def opts(tmp_path, **kw):
+    base = dict(scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=4.0,
+                outdir=str(tmp_path / "out"), width=48, height=36, samples=4, batch_size=2)
+    base.update(kw)
+    return ConvertOptions(**base)
+
+
+def test_convert_writes_plan_wrappers_and_makefile(tmp_path):
+    before = (SCENES / "paper.pov").read_bytes()
+    plan = convert(opts(tmp_path))
+    out = tmp_path / "out"
+    for name in ("plan.json", "pinhole.pov", "focal_blur.pov", "Makefile",
+                 "samples/batch_000.pov", "samples/batch_001.pov"):
+        assert (out / name).exists(), name
+    saved = json.loads((out / "plan.json").read_text())
+    assert saved["batches"] == [[0, 1], [2, 3]]
+    cam = saved["povray_camera"]
+    # focal_blur aperture is twice the entrance-pupil diameter, in scene units (m)
+    assert cam["aperture"] == pytest.approx(2 * 24.8051e-3, rel=1e-4)
+    assert saved["model_error"]["max_distortion_px"] >= 0
+    assert "#include" in (out / "focal_blur.pov").read_text()
+    # the scene itself is untouched
+    assert (SCENES / "paper.pov").read_bytes() == before
+    assert plan["focus"]["film_distance_mm"] > plan["lens"]["efl_mm"] * 0.7
+
+
+def test_make_renders_and_a_second_make_does_nothing(tmp_path):
+    convert(opts(tmp_path))
+    out = tmp_path / "out"
+    r = subprocess.run(["make", "-C", str(out), "-j2"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    img = read_image(out / "image.exr")
+    assert img.shape == (36, 48, 3) and np.isfinite(img).all() and img.mean() > 0.05
+    assert (out / "image.png").exists()
+    again = subprocess.run(["make", "-C", str(out)], capture_output=True, text=True)
+    assert again.returncode == 0 and "Nothing to be done" in again.stdout
+
+
+def test_interrupted_render_resumes_to_the_same_image(tmp_path):
+    full = tmp_path / "full"
+    convert(opts(tmp_path, outdir=str(full)))
+    render_outdir(full, jobs=1, quiet=True)
+    reference = read_image(full / "image.exr")
+
+    part = tmp_path / "part"
+    convert(opts(tmp_path, outdir=str(part)))
+    render_batch(part, 0)                              # the run stops after one batch ...
+    (part / "samples" / "sample_0001.exr").unlink()    # ... and one sample of it is lost
+    render_outdir(part, jobs=2, quiet=True)            # re-run
+    np.testing.assert_array_equal(read_image(part / "image.exr"), reference)
+
+
+def test_tiny_stop_mesh_render_matches_the_pinhole_render(tmp_path):
+    o = opts(tmp_path, width=64, height=48, samples=8, batch_size=8, stop_diameter_mm=2.0,
+             jitter=False)
+    convert(o)
+    out = tmp_path / "out"
+    render_outdir(out, jobs=2, quiet=True)
+    # without vignetting (cos^4 falloff is physical, and a pinhole has none)
+    mesh = composite_outdir(out, vignetting=False, write=False)
+    pin = read_image(render_view(out, "pinhole"))[..., :3]
+    diff = np.abs(mesh - pin).mean(axis=2)
+    # Same view pixel for pixel, up to the real lens's residual geometry against the
+    # fitted perspective (<= 0.1 px here: its distortion, and rays spread over a 2 mm
+    # stop), which flips pixels only where a hard checker edge crosses the pixel centre,
+    # and the aliased checker floor near the horizon.
+    c = diff[8:-8, 10:-10]
+    assert np.median(c) < 0.01
+    assert (c > 0.2).mean() < 0.05
+    # a view shifted by one pixel is clearly worse, so the test can fail
+    shifted = np.abs(mesh[:, 1:] - pin[:, :-1]).mean(axis=2)[8:-8, 10:-10]
+    assert np.mean(shifted) > 2.0 * np.mean(c)
+
+
+def test_focal_blur_method_renders_one_image(tmp_path):
+    convert(opts(tmp_path, method="focal-blur", samples=7))
+    out = tmp_path / "out"
+    render_outdir(out, quiet=True)
+    img = read_image(out / "image.exr")
+    assert img.shape[:2] == (36, 48) and np.isfinite(img).all()
+    assert "blur_samples 7, 7" in (out / "focal_blur.pov").read_text()
+
+
+def test_cli_render_and_errors(tmp_path):
+    r = povlens("render", str(SCENES / "chart.pov"), "--lens", "wide.22mm", "--focus", "3",
+                "--width", "32", "--height", "24", "--samples", "2", "-o", str(tmp_path / "c"),
+                "-q")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "c" / "image.png").exists()
+
+    nocam = tmp_path / "nocam.pov"
+    nocam.write_text('#version 3.7;\nsphere { 0, 1 pigment { rgb 1 } }\n')
+    r = povlens("convert", str(nocam), "--lens", "dgauss.50mm", "--focus", "3", "-o",
+                str(tmp_path / "n"))
+    assert r.returncode == 2 and "--location" in r.stderr and "Traceback" not in r.stderr
+
+    odd = tmp_path / "odd.pov"
+    odd.write_text('#version 3.7;\n#macro Cam() <0,1,-3> #end\n'
+                   'camera { location Cam() look_at <0,0,0> }\n')
+    r = povlens("convert", str(odd), "--lens", "dgauss.50mm", "--focus", "3", "-o",
+                str(tmp_path / "m"))
+    assert r.returncode == 2 and "--location" in r.stderr and "Traceback" not in r.stderr
+    # ... and the options make it work
+    r = povlens("convert", str(odd), "--lens", "dgauss.50mm", "--focus", "3", "-o",
+                str(tmp_path / "m"), "--location", "0,1,-3", "--look-at", "0,0,0")
+    assert r.returncode == 0, r.stderr
+
+    broken = tmp_path / "broken.pov"
+    broken.write_text('#version 3.7;\ncamera { location <0,1,-3> look_at <0,0,0> }\n'
+                      'sphere { 0, 1 pigment { rgb 1 } \n')
+    r = povlens("render", str(broken), "--lens", "dgauss.50mm", "--focus", "3", "--width", "16",
+                "--height", "12", "--samples", "1", "-o", str(tmp_path / "b"), "-q")
+    assert r.returncode == 3 and "POV-Ray failed" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "b" / "image.exr").exists()
+
+    r = povlens("render", str(SCENES / "chart.pov"), "--lens", "dgauss.50mm", "--focus", "3",
+                "-o", str(tmp_path / "p"), env={"POVLENS_POVRAY": "/nonexistent/povray"})
+    assert r.returncode == 3 and "POVLENS_POVRAY" in r.stderr and "Traceback" not in r.stderr
