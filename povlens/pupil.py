@@ -245,6 +245,10 @@ def sampling_plane_z_mm(lens: LensPrescription, film_distance_mm: float,
     return float(z), "exit-pupil"
 
 
+#: Smallest stop diameter, as a fraction of the focal length, a table is built for.
+MIN_STOP_FRACTION = 1e-4
+
+
 # ----- exact boundary probing ----------------------------------------------------------
 
 class _Prober:
@@ -331,6 +335,20 @@ class _Prober:
                     cx[b], bbox[b] = self._centre(r[b], Xh[k][okh[k]], Yh[k][okh[k]],
                                                   (h[k, 1] - h[k, 0]) / grid,
                                                   max(h[k, 3], 0.0) / grid)
+        if not found.all():
+            # Small pass regions (a stopped-down lens) slip between the grid points:
+            # seed them with the real chief ray, which crosses the centre of the stop.
+            from .thin_lens import chief_ray_aim_mm
+            miss = np.nonzero(~found)[0]
+            x_rear, ok_aim = chief_ray_aim_mm(self.lens, self.film_distance_mm, r[miss])
+            self.rays += 42 * miss.size
+            aim = r[miss] + (x_rear - r[miss]) * self.zp / self.film_distance_mm
+            ok = ok_aim & self.passes(r[miss], aim, np.zeros(miss.size))
+            for k in np.nonzero(ok)[0]:
+                b = miss[k]
+                found[b] = True
+                cell = 1e-6 * max(1.0, dR[b])
+                cx[b], bbox[b] = self._centre(r[b], aim[k:k + 1], np.zeros(1), cell, cell)
         return cx, found, bbox
 
     def _centre(self, r, xs, ys, cell_x, cell_y):
@@ -843,6 +861,14 @@ def build_pupil_table(lens: LensPrescription, film_distance_mm: float,
     if n_angles is not None and not (2 <= int(n_angles) <= 4096):
         raise UsageError(f"n_angles {n_angles!r}: must be between 2 and 4096")
     hd = float(film_half_diagonal_mm)
+    pdat = paraxial_data(lens)
+    if pdat.stop_diameter < MIN_STOP_FRACTION * abs(pdat.efl):
+        raise OpticsError(
+            f"{lens.source}: the stop diameter {pdat.stop_diameter:.3g} mm is below "
+            f"{MIN_STOP_FRACTION:g} of the focal length; at that size the lens is a pinhole "
+            f"whose pupil cannot be resolved in float64 (and diffraction would dominate)",
+            f"use --stop-diameter {MIN_STOP_FRACTION * abs(pdat.efl):.3g} or more, or render "
+            f"with --method pinhole")
     zp, plane_used = sampling_plane_z_mm(lens, float(film_distance_mm), plane)
     pr = _Prober(lens, film_distance_mm, zp)
     min_w = float(min_interval_mm) if min_interval_mm is not None else 1e-5 * hd

@@ -27,6 +27,7 @@ bright as the pinhole render, and vignetting shows as it would on film.
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
 import re
@@ -178,9 +179,11 @@ def render_batch(outdir: str | os.PathLike, batch: int) -> list[int]:
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)
         _exposure(outdir, plan, lens, table)
+        t0 = time.perf_counter()
         try:
             for k in todo:
                 _write_mesh(plan, lens, table, outdir, k)
+            t1 = time.perf_counter()
             # Frames must be consecutive: render runs of consecutive samples.
             runs, run = [], [todo[0]]
             for k in todo[1:]:
@@ -192,6 +195,9 @@ def render_batch(outdir: str | os.PathLike, batch: int) -> list[int]:
             runs.append(run)
             for r in runs:
                 _render_frames(plan, outdir, batch, r)
+            t2 = time.perf_counter()
+            write_text(outdir / "samples" / f"batch_{batch:03d}.timing.json", json.dumps(
+                {"samples": len(todo), "rays_and_meshes_s": t1 - t0, "povray_s": t2 - t1}) + "\n")
         finally:
             for k in todo:
                 _sample_paths(outdir, k)[2].unlink(missing_ok=True)

@@ -31,7 +31,8 @@ from .paraxial import paraxial_data
 from .prescription import LensPrescription
 from .tracer import trace_from_film, trace_from_scene
 
-__all__ = ["EquivalentThinLens", "fit_thin_lens", "chief_rays", "measure_model_error"]
+__all__ = ["EquivalentThinLens", "fit_thin_lens", "chief_rays", "chief_ray_aim_mm",
+           "measure_model_error"]
 
 
 def _sub_lens(lens: LensPrescription, first: int) -> LensPrescription:
@@ -43,23 +44,22 @@ def _sub_lens(lens: LensPrescription, first: int) -> LensPrescription:
                         abbe_vd=lens.abbe_vd[sl], lines=lens.lines[first:])
 
 
-def chief_rays(lens: LensPrescription, film_distance_mm: float, film_radius_mm: np.ndarray,
-               iterations: int = 40):
-    """Real chief rays from film points (r, 0, 0) through the centre of the stop.
+def chief_ray_aim_mm(lens: LensPrescription, film_distance_mm: float, film_radius_mm,
+                     iterations: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """Where real chief rays from film points (r, 0, 0) cross the rear-vertex plane.
 
-    Returns (TraceResult of the rays leaving the front surface, found (n,) bool).
-    The ray is aimed at the rear-vertex plane point x_rear found by the secant
-    method so that its height at the stop plane is 0.  Clear apertures other
-    than the stop's are ignored while aiming (the chief ray is a construction)
-    but not in the returned trace, whose ``passed`` tells whether it gets out.
+    The chief ray passes through the centre of the stop.  Its aim x_rear on the
+    plane z = film_distance_mm is found by the secant method so that its height at
+    the stop plane is 0, starting from the paraxial aim at the exit-pupil centre.
+    Clear apertures other than the stop's are ignored while aiming (the chief ray
+    is a construction).  Returns (x_rear (n,) mm, found (n,) bool).
     """
     p = paraxial_data(lens)
     s = p.stop_index
-    r = np.asarray(film_radius_mm, dtype=np.float64).ravel()
+    r = np.atleast_1d(np.asarray(film_radius_mm, dtype=np.float64)).ravel()
     n = r.size
-    wide = lens.replace(aperture_diameter_mm=np.full(lens.n_surfaces, 1e6))
-    # keep sphere validity: clear radius cannot exceed |R|
-    wide = wide.replace(aperture_diameter_mm=np.where(
+    # Open every clear aperture (a clear radius cannot exceed |R|) and stop at the stop.
+    wide = lens.replace(aperture_diameter_mm=np.where(
         lens.radius_mm != 0, 2 * np.abs(lens.radius_mm) * (1 - 1e-12), 1e6))
     to_stop = _sub_lens(wide, s)
     origin = np.column_stack([r, np.zeros(n), np.zeros(n)])
@@ -70,10 +70,9 @@ def chief_rays(lens: LensPrescription, film_distance_mm: float, film_radius_mm: 
         t = trace_from_film(to_stop, film_distance_mm, origin, d)
         return t.origin_mm[:, 0], t.passed
 
-    # Paraxial start: the chief ray aims at the exit-pupil centre.
-    z_xp = film_distance_mm - p.exit_pupil_position  # camera frame z of the exit pupil
+    z_xp = film_distance_mm - p.exit_pupil_position  # camera-frame z of the exit pupil
     x0 = r * (1.0 - z_rear / z_xp) if z_xp != 0 else np.zeros(n)
-    x1 = x0 + 1e-3 * max(1.0, float(np.max(np.abs(r)) if n else 1.0))
+    x1 = x0 + 1e-3 * max(1.0, float(np.max(np.abs(r))) if n else 1.0)
     h0, ok0 = stop_height(x0)
     h1, ok1 = stop_height(x1)
     for _ in range(iterations):
@@ -85,8 +84,20 @@ def chief_rays(lens: LensPrescription, film_distance_mm: float, film_radius_mm: 
         h1, ok1 = stop_height(x1)
         if np.all(~ok1 | (np.abs(h1) < 1e-12)):
             break
-    found = ok1 & (np.abs(h1) < 1e-9)
-    d = np.column_stack([x1 - r, np.zeros(n), np.full(n, z_rear)])
+    return x1, ok1 & (np.abs(h1) < 1e-9)
+
+
+def chief_rays(lens: LensPrescription, film_distance_mm: float, film_radius_mm: np.ndarray):
+    """Real chief rays from film points (r, 0, 0) through the centre of the stop.
+
+    Returns (TraceResult of the rays leaving the front surface, found (n,) bool);
+    the trace's ``passed`` tells whether the chief ray gets through every aperture.
+    """
+    r = np.atleast_1d(np.asarray(film_radius_mm, dtype=np.float64)).ravel()
+    x_rear, found = chief_ray_aim_mm(lens, film_distance_mm, r)
+    n = r.size
+    origin = np.column_stack([r, np.zeros(n), np.zeros(n)])
+    d = np.column_stack([x_rear - r, np.zeros(n), np.full(n, float(film_distance_mm))])
     return trace_from_film(lens, film_distance_mm, origin, d), found
 
 

@@ -307,11 +307,14 @@ def test_bad_arguments_raise_usage_errors():
         t.sample(np.zeros((3, 2)), np.zeros((4, 2)))
 
 
-def test_no_ray_from_the_film_centre_is_an_optics_error():
+def test_a_stop_too_small_to_resolve_is_a_clear_optics_error():
     lens = read_lens("dgauss.50mm")
     closed = lens.with_aperture_diameter(5, 1e-9)  # the stop closed to a nanometre
-    with pytest.raises(OpticsError, match="film centre"):
+    with pytest.raises(OpticsError, match="stop diameter"):
         build_pupil_table(closed, 36.36, 17.5)
+    # 5 um (1e-4 of the focal length) still works
+    t = build_pupil_table(lens.with_aperture_diameter(5, 0.006), 36.36, 17.5)
+    assert np.isfinite(t.area_mm2(np.array([0.0]))).all()
 
 
 def test_save_load_and_cache_check(tables, tmp_path):
@@ -372,3 +375,25 @@ def test_a_pupil_that_is_not_star_shaped_is_flagged(tables):
     assert t.stats["non_star_shaped_radii"] > 0 and t.stats["non_star_shaped_from_mm"] > 5
     for name, table in tables.items():
         assert table.stats["non_star_shaped_radii"] == 0, name
+
+
+@pytest.mark.parametrize("name, stop_mm", [("dgauss.50mm", 0.3), ("telephoto.250mm", 2.0),
+                                           ("wide.22mm", 0.5)])
+def test_tiny_stops_are_found_and_contained(name, stop_mm):
+    """A pinhole-like stop makes a pass region far smaller than the coarse search grid;
+    the chief ray seeds it.  The table must still contain every passing ray."""
+    lens = stopped_down(read_lens(name), stop_diameter_mm=stop_mm)
+    fd = thick_lens_film_distance_mm(lens, 8_000.0)
+    t = build_pupil_table(lens, fd, HALF_DIAGONAL)
+    assert t.pass_fraction(np.array([0.0, 8.0, 16.0]), n_samples=512).fraction.min() > 0.95
+    for r in (0.0, 9.0):
+        pr = _Prober(t.lens, t.film_distance_mm, t.plane_z_mm)
+        # a dense grid over the table's own region grown 3x: passing rays must be inside
+        pts = t.region(r)
+        c = pts.mean(axis=0)
+        half = 3.0 * np.abs(pts - c).max()
+        g = np.linspace(-half, half, 121)
+        X, Y = np.meshgrid(c[0] + g, c[1] + g)
+        ok = pr.passes(np.array(r), X, Y)
+        assert ok.sum() > 100
+        assert t.contains(r, np.stack([X[ok], Y[ok]], axis=1)).all()

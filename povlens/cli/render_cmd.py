@@ -43,8 +43,9 @@ def _add_convert_arguments(p) -> None:
                         "per sample; default)")
     p.add_argument("--samples", type=int, default=16,
                    help="lens samples per pixel (mesh renders, or focal_blur's blur_samples)")
-    p.add_argument("--batch-size", type=int, default=8,
-                   help="lens samples per POV-Ray process (default 8)")
+    p.add_argument("--batch-size", type=int, default=None,
+                   help="lens samples per POV-Ray process (default: samples / cores, so "
+                        "each core runs one process)")
     p.add_argument("--seed", type=int, default=0, help="seed of the sample sequence")
     p.add_argument("--location", type=_vector, metavar="X,Y,Z",
                    help="camera location (instead of the scene's camera)")
@@ -68,7 +69,7 @@ def options_from_args(args) -> ConvertOptions:
         raise UsageError(f"--width/--height {args.width}x{args.height}: must be at least 1 pixel")
     if args.samples < 1:
         raise UsageError(f"--samples {args.samples}: must be at least 1")
-    if args.batch_size < 1:
+    if args.batch_size is not None and args.batch_size < 1:
         raise UsageError(f"--batch-size {args.batch_size}: must be at least 1")
     return ConvertOptions(
         scene=args.scene, lens=args.lens, focus=args.focus, outdir=args.outdir,
