@@ -101,13 +101,25 @@ def _sample_paths(outdir: Path, k: int) -> tuple[Path, Path, Path]:
     return s / f"sample_{k:04d}.exr", s / f"sample_{k:04d}.weight.exr", s / f"sample_{k:04d}.inc"
 
 
-def _write_mesh(plan: dict, lens, table, outdir: Path, k: int) -> None:
+def _write_mesh(plan: dict, lens, table, outdir: Path, k: int,
+                points: np.ndarray | None = None) -> None:
+    """Write sample k's ray mesh and weights.
+
+    ``table`` is the lens sampler (the plan's exit-pupil table; any object with
+    the ``sample(film_xy, u)`` protocol of :func:`povlens.lens_camera.sample_rays`
+    works).  ``points`` overrides the plan's (H, W, 4) sample points of sample k
+    (default: :func:`povlens.lens_camera.sample_points`); :mod:`povlens.bench`
+    uses both to render with the baseline samplers and random points.
+    """
     film = film_for(plan)
     pl = plan["placement"]
     placement = ScenePlacement(np.array(pl["film_centre"]), np.array(pl["right"]),
                                np.array(pl["up"]), np.array(pl["forward"]), pl["mm_per_unit"])
     inp = plan["inputs"]
-    points = sample_points(inp["samples"], film.height_px, film.width_px, inp["seed"])(k)
+    if points is None:
+        points = sample_points(inp["samples"], film.height_px, film.width_px, inp["seed"])(k)
+    else:
+        points = np.array(points, dtype=np.float64)
     if not inp.get("jitter", True):
         points[..., :2] = 0.5  # pixel centres, as POV-Ray's perspective camera
     rays = sample_rays(lens, plan["focus"]["film_distance_mm"], film, table, placement, points)
