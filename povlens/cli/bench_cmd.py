@@ -35,13 +35,13 @@ def register(sub) -> None:
                       "sampling, and focal_blur",
         description=bench.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--quick", action="store_true",
-                   help="the quick setting (48x36, one lens, N = 4,16; about 2 minutes)")
+                   help="the quick setting (48x36, one lens, N = 4,8,16; 1-2 minutes)")
     p.add_argument("--scene", help="POV-Ray scene (default scenes/paper.pov)")
     p.add_argument("--focus", type=positive_float, help="focus distance in m (default 4)")
     p.add_argument("--lenses", help="comma-separated lenses (default dgauss.50mm,wide.22mm,"
                                     "telephoto.250mm; quick: dgauss.50mm)")
     p.add_argument("--samples", type=_counts, metavar="N,N,...",
-                   help="sample counts (default 4,8,16,32,64; quick: 4,16)")
+                   help="sample counts (default 4,8,16,32,64; quick: 4,8,16)")
     p.add_argument("--reference-samples", type=_positive_int, metavar="N",
                    help="samples of the reference (default 256; quick: 64)")
     p.add_argument("--width", type=_positive_int, help="image width (default 80; quick: 48)")
