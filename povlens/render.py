@@ -43,6 +43,7 @@ import numpy as np
 from .convert import ConvertOptions, convert, read_plan
 from .errors import PovlensError, PovrayError
 from .film import Film
+from .composite import composite
 from .images import read_image, write_exr, write_png_srgb
 from .lens_camera import ScenePlacement, sample_points, sample_rays
 from .mesh_camera import write_ray_mesh, write_text
@@ -264,23 +265,13 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
     lens = lens_for(plan)
     table = pupil_table_for(outdir, plan, lens)
     exposure = _exposure(outdir, plan, lens, table)
-    total = None
-    wsum = 0.0
-    for k in range(n):
-        exr, wpath, _ = _sample_paths(outdir, k)
-        img = read_image(exr)[drop:, :, :3].astype(np.float64)
-        w = read_image(wpath)[..., 0].astype(np.float64)
-        if img.shape[:2] != w.shape:
-            raise PovlensError(f"{exr}: size {img.shape[:2]} does not match its weights {w.shape}",
-                               "delete the folder's samples and render again")
-        contrib = img * w[..., None]
-        total = contrib if total is None else total + contrib
-        wsum = wsum + w
+    paths = [_sample_paths(outdir, k)[0] for k in range(n)]
+    weights = [read_image(_sample_paths(outdir, k)[1])[..., 0].astype(np.float64)
+               for k in range(n)]
+    # sum w I / sum w, in float64 (composite.py); times sum w / N for the camera measurement
+    image = composite(paths, weights, drop_top_rows=drop)[..., :3].astype(np.float64)
     if vignetting:
-        image = total * (exposure / n)
-    else:
-        image = np.where(wsum[..., None] > 0, total / np.where(wsum > 0, wsum, 1.0)[..., None],
-                         0.0)
+        image *= (np.sum(weights, axis=0) * (exposure / n))[..., None]
     if write:
         _finish_image(outdir, image.astype(np.float32))
     return image
