@@ -73,7 +73,7 @@ def thick_lens_film_distance_mm(lens: LensPrescription, distance_mm: float,
     return v + p.principal_rear_from_rear_vertex
 
 
-def _pupil_bundle(n_rings: int) -> np.ndarray:
+def pupil_disc_points(n_rings: int) -> np.ndarray:
     """Points (m, 2) spread evenly over the unit disc: ring k at radius (k - 1/2)/n
     with 6k points, so every point stands for about the same area."""
     pts = []
@@ -90,7 +90,7 @@ def rms_spot_mm(lens: LensPrescription, film_distance_mm: float, distance_mm: fl
                 ) -> tuple[float, int]:
     """RMS radius (mm) on the film of an axial object's bundle; and how many rays passed."""
     p = p or paraxial_data(lens)
-    disc = _pupil_bundle(n_rings) * (0.5 * p.entrance_pupil_diameter * pupil_fill)
+    disc = pupil_disc_points(n_rings) * (0.5 * p.entrance_pupil_diameter * pupil_fill)
     front_z = film_distance_mm + p.total_track
     ep_z = front_z - p.entrance_pupil_position
     if math.isinf(distance_mm):
@@ -118,6 +118,12 @@ def exact_film_distance_mm(lens: LensPrescription, distance_mm: float,
     """
     p = p or paraxial_data(lens)
     start = start_mm if start_mm is not None else thick_lens_film_distance_mm(lens, distance_mm, p)
+    if not (start > 0 and math.isfinite(start)):
+        # A diverging lens (or an object too close): the image is virtual, in front of
+        # the rear vertex, and no film position behind the lens can receive it.
+        raise OpticsError(f"{lens.source}: the image of an object at {distance_mm:g} mm lies "
+                          f"{start:.6g} mm from the rear vertex (not behind the lens); no film "
+                          f"distance focuses it", "a lens with positive power is needed")
     half = max(0.02 * abs(start), 0.01 * p.efl, 0.1)
     limit = max(abs(start), p.efl)
     while True:

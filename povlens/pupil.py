@@ -457,7 +457,26 @@ def _area_error(exact: np.ndarray, approx: np.ndarray) -> float:
 
 # ----- the table --------------------------------------------------------------------
 
-class PupilTable:
+class SamplerMeasurements:
+    """Pass fraction and irradiance estimates shared by every lens sampler."""
+
+    lens: LensPrescription
+    film_distance_mm: float
+
+    def pass_fraction(self, film_radius_mm, *, n_samples: int = 1024, seed: int = 0):
+        """:class:`povlens.sampling.PassFraction` of this sampler at each film radius."""
+        from .sampling import pass_fraction
+        return pass_fraction(self, self.lens, self.film_distance_mm, film_radius_mm,
+                             n_samples=n_samples, seed=seed)
+
+    def irradiance_factor(self, film_radius_mm, *, n_samples: int = 4096, seed: int = 0):
+        """Estimated E/L at each film radius (:func:`povlens.sampling.irradiance_factor`)."""
+        from .sampling import irradiance_factor
+        return irradiance_factor(self, self.lens, self.film_distance_mm, film_radius_mm,
+                                 n_samples=n_samples, seed=seed)
+
+
+class PupilTable(SamplerMeasurements):
     """Exit-pupil regions over film radius for one lens, stop, focus and film.
 
     The region for the film point (r, 0) is the polygon with vertices
@@ -655,18 +674,6 @@ class PupilTable:
         return finish_sample(f, px, py, self.plane_z_mm, area, inside & (total > 0))
 
     # -- measurements
-    def pass_fraction(self, film_radius_mm, *, n_samples: int = 1024, seed: int = 0):
-        """:class:`povlens.sampling.PassFraction` of this table's samples at each radius."""
-        from .sampling import pass_fraction
-        return pass_fraction(self, self.lens, self.film_distance_mm, film_radius_mm,
-                             n_samples=n_samples, seed=seed)
-
-    def irradiance_factor(self, film_radius_mm, *, n_samples: int = 4096, seed: int = 0):
-        """Estimated E/L at each film radius (see :func:`povlens.sampling.irradiance_factor`)."""
-        from .sampling import irradiance_factor
-        return irradiance_factor(self, self.lens, self.film_distance_mm, film_radius_mm,
-                                 n_samples=n_samples, seed=seed)
-
     def exposure_normalisation(self) -> float:
         """1 / (E/L) at the film centre, from the exact on-axis boundary: the factor
         that gives the frame centre the brightness of a pinhole render."""

@@ -37,7 +37,7 @@ import numpy as np
 
 from .errors import UsageError
 from .prescription import LensPrescription, sag_mm
-from .pupil import LensSample, _check_sample_args, _polar, finish_sample
+from .pupil import LensSample, SamplerMeasurements, _check_sample_args, _polar, finish_sample
 from .tracer import trace_from_film
 
 __all__ = ["PbrtBoxes", "NaiveRearElement", "radical_inverse", "PBRT_INTERVALS",
@@ -59,23 +59,6 @@ def radical_inverse(i: np.ndarray, base: int) -> np.ndarray:
     return out
 
 
-class _SamplerMixin:
-    lens: LensPrescription
-    film_distance_mm: float
-
-    def pass_fraction(self, film_radius_mm, *, n_samples: int = 1024, seed: int = 0):
-        """:class:`povlens.sampling.PassFraction` of this sampler at each film radius."""
-        from .sampling import pass_fraction
-        return pass_fraction(self, self.lens, self.film_distance_mm, film_radius_mm,
-                             n_samples=n_samples, seed=seed)
-
-    def irradiance_factor(self, film_radius_mm, *, n_samples: int = 4096, seed: int = 0):
-        """Estimated E/L at each film radius (:func:`povlens.sampling.irradiance_factor`)."""
-        from .sampling import irradiance_factor
-        return irradiance_factor(self, self.lens, self.film_distance_mm, film_radius_mm,
-                                 n_samples=n_samples, seed=seed)
-
-
 def _check_common(film_distance_mm, film_half_diagonal_mm):
     for name, v in (("film_distance_mm", film_distance_mm),
                     ("film_half_diagonal_mm", film_half_diagonal_mm)):
@@ -83,7 +66,7 @@ def _check_common(film_distance_mm, film_half_diagonal_mm):
             raise UsageError(f"{name} = {v!r}: must be a positive number of mm")
 
 
-class PbrtBoxes(_SamplerMixin):
+class PbrtBoxes(SamplerMeasurements):
     """pbrt-style exit-pupil bounds: one axis-aligned box per radial film interval.
 
     boxes : (n_intervals, 4) x0, x1, y0, y1 on the rear-vertex plane in the rotated
@@ -246,7 +229,7 @@ class PbrtBoxes(_SamplerMixin):
         return s
 
 
-class NaiveRearElement(_SamplerMixin):
+class NaiveRearElement(SamplerMeasurements):
     """Uniform points on the rear element's disc (the 2012 paper's method)."""
 
     def __init__(self, lens: LensPrescription, film_distance_mm: float,

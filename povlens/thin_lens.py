@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from .film import Film
+from .focus import pupil_disc_points
 from .paraxial import paraxial_data
 from .prescription import LensPrescription
 from .tracer import trace_from_film, trace_from_scene
@@ -165,16 +166,6 @@ def fit_thin_lens(lens: LensPrescription, film_distance_mm: float, focus_z_mm: f
                               rms if math.isfinite(rms) else -1.0)
 
 
-def _disc(n_rings: int) -> np.ndarray:
-    pts = []
-    for k in range(1, n_rings + 1):
-        r = (k - 0.5) / n_rings
-        m = 6 * k
-        a = (np.arange(m) + 0.5 * (k % 2)) * 2 * math.pi / m
-        pts.append(np.stack([r * np.cos(a), r * np.sin(a)], axis=1))
-    return np.concatenate(pts)
-
-
 def measure_model_error(lens: LensPrescription, film_distance_mm: float,
                         model: EquivalentThinLens, film: Film, object_z_mm,
                         n_field: int = 9, n_rings: int = 12) -> dict:
@@ -197,7 +188,7 @@ def measure_model_error(lens: LensPrescription, film_distance_mm: float,
     depths = np.atleast_1d(np.asarray(object_z_mm, dtype=np.float64))
     hs = np.linspace(0.0, film.half_diagonal_mm, n_field)
     diag_dir = np.array([film.width_mm, film.height_mm]) / math.hypot(film.width_mm, film.height_mm)
-    disc = _disc(n_rings) * (0.65 * model.pupil_diameter_mm)
+    disc = pupil_disc_points(n_rings) * (0.65 * model.pupil_diameter_mm)
     m = len(disc)
     ep_z = model.centre_z_mm
     out = {k: np.zeros((len(depths), n_field)) for k in
