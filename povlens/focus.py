@@ -128,6 +128,9 @@ def exact_film_distance_mm(lens: LensPrescription, distance_mm: float,
     limit = max(abs(start), p.efl)
     while True:
         lo, hi = max(start - half, 1e-6), start + half
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            raise OpticsError(f"{lens.source}: the focus for {distance_mm:g} mm lies too far "
+                              f"from the lens ({start:.6g} mm) to search with real rays")
         res = minimize_scalar(lambda f: rms_spot_mm(lens, f, distance_mm, p)[0],
                               bounds=(lo, hi), method="bounded",
                               options={"xatol": 1e-9 * max(1.0, start), "maxiter": 300})

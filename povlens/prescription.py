@@ -40,6 +40,10 @@ __all__ = ["LensPrescription", "read_lens", "parse_lens_text", "write_lens", "fo
 AIR = 1.0
 #: Surfaces may touch (files round data to ~6 digits) but not cross by more than this.
 CROSSING_TOLERANCE_MM = 1e-5
+#: Supported magnitudes of non-zero radii and aperture diameters, and the largest
+#: thickness (mm), and the largest refractive index.
+MIN_LENGTH_MM, MAX_LENGTH_MM = 1e-6, 1e20
+MAX_INDEX = 10.0
 
 
 def sag_mm(curvature_per_mm: float | np.ndarray, r_mm: np.ndarray) -> np.ndarray:
@@ -233,6 +237,18 @@ def parse_lens_text(text: str, source: str = "<string>") -> LensPrescription:
     for i, ln in enumerate(lines):
         if diam[i] <= 0.0:
             raise LensFileError(source, ln, f"aperture diameter {diam[i]:g} mm must be positive")
+        # Outside these ranges 1/R or the paraxial matrices overflow (e.g. R = 1e-320
+        # has an infinite curvature); no real lens comes near them.
+        for what, v in (("radius", radius[i]), ("aperture diameter", diam[i])):
+            if v != 0.0 and not MIN_LENGTH_MM <= abs(v) <= MAX_LENGTH_MM:
+                raise LensFileError(source, ln, f"{what} {v:g} mm is outside the supported "
+                                    f"range {MIN_LENGTH_MM:g} .. {MAX_LENGTH_MM:g} mm")
+        if abs(thick[i]) > MAX_LENGTH_MM:
+            raise LensFileError(source, ln, f"thickness {thick[i]:g} mm is larger than the "
+                                f"supported {MAX_LENGTH_MM:g} mm")
+        if index[i] > MAX_INDEX:
+            raise LensFileError(source, ln, f"index {index[i]:g} is above {MAX_INDEX:g}; no "
+                                f"optical medium has it")
         if index[i] != 0.0 and index[i] < 1.0:
             raise LensFileError(source, ln, f"index {index[i]:g} is below 1",
                                 "use the refractive index of the medium after the surface "

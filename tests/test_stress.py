@@ -392,3 +392,23 @@ def test_numerically_extreme_valid_rows_trace_finite(vals, film):
     d = np.column_stack([rng.normal(0, 0.1, (8, 2)), np.ones(8)])
     _check_result(trace_from_film(lens, film, o, d), lens, 8)
     _check_result(trace_from_scene(lens, film, o + [0, 0, 1e3], -d), lens, 8)
+    for dist in (math.inf, 1e4):
+        try:
+            v = focus_mod.thick_lens_film_distance_mm(lens, dist)
+        except (OpticsError, UsageError):
+            continue
+        assert math.isfinite(v)
+
+
+@pytest.mark.parametrize("text", [
+    "1e-320 1 1.5 2e-320\n-1e-320 1 0 2e-320\n",   # 1/R overflows: infinite curvature
+    "5e-324 1 1.5 1e-323\n0 1 0 1e-323\n",
+    "10 1e308 1.5 5\n-10 1e308 0 5\n0 0 0 5\n",    # the total track overflows
+    "1e308 1 1.5 1e308\n-1e308 1 0 1e308\n",        # focus bounds overflow
+    "10 1 1e300 5\n-10 1 0 5\n",                  # absurd index
+])
+def test_lengths_that_overflow_are_refused_by_the_parser(text):
+    """Regression: these parsed, and paraxial_data / focus then raised
+    ZeroDivisionError or scipy's ValueError instead of a povlens error."""
+    with pytest.raises(LensFileError, match="supported|no optical medium"):
+        parse_lens_text(text)
