@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings, strategies as st
+from hypothesis import HealthCheck, assume, event, given, settings, strategies as st
 
 from povlens import focus as focus_mod
 from povlens.errors import LensFileError, OpticsError, UsageError
@@ -282,15 +282,39 @@ def test_thick_lens_focus_is_finite_or_a_povlens_error(lf, dist):
     assert math.isfinite(v)
 
 
-@settings(max_examples=12, **SETTINGS)
-@given(lf=lenses(max_elements=2), dist=distances)
+@settings(max_examples=20, **SETTINGS)
+@given(lf=lenses(max_elements=2),
+       dist=st.one_of(st.just(math.inf), st.floats(10.0, 1e6), st.floats(-1.0, 1.0)))
 def test_exact_focus_is_finite_or_a_povlens_error(lf, dist):
     lens, _ = lf
     try:
         r = focus_mod.focus(lens, dist)
-    except (OpticsError, UsageError):
+    except (OpticsError, UsageError) as e:
+        event(f"refused: {type(e).__name__}")
         return
+    event("focused")
     assert math.isfinite(r.exact_film_distance_mm) and math.isfinite(r.thick_lens_film_distance_mm)
+
+
+SHIPPED = ["dgauss.50mm", "cooke.triplet.50mm", "singlet.pcx.25mm", "tessar.50mm",
+           "telephoto.250mm", "fisheye.10mm", "wide.22mm"]
+
+
+@settings(max_examples=10, **SETTINGS)
+@given(name=st.sampled_from(SHIPPED), f_number=st.one_of(st.none(), st.floats(0.5, 64.0)),
+       dist=st.one_of(st.just(math.inf), st.floats(1.0, 1e7)))
+def test_focus_of_shipped_lenses_converges_or_refuses(name, f_number, dist):
+    from povlens.paraxial import stopped_down
+    lens = read_lens(name)
+    try:
+        lens = stopped_down(lens, f_number=f_number)
+        r = focus_mod.focus(lens, dist)
+    except (OpticsError, UsageError) as e:
+        event(f"refused: {type(e).__name__}")
+        return
+    event("focused")
+    assert math.isfinite(r.exact_film_distance_mm) and r.exact_film_distance_mm > 0
+    assert math.isfinite(r.exact_rms_spot_mm)
 
 
 def test_focus_of_a_diverging_lens_is_an_optics_error():
