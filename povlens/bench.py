@@ -219,13 +219,27 @@ def time_to_error(rows: list[Row], target: float) -> tuple[float, bool]:
     return float(math.exp(lt[i] + (lg - le[i]) / slope)), True
 
 
-def _fit_slope(rows: list[Row]) -> float:
-    """Least-squares slope of log RMSE against log seconds."""
+def _slope_in_samples(rows: list[Row]) -> float:
+    """Least-squares slope of log RMSE against log N (-1/2: plain Monte Carlo)."""
     if len(rows) < 2:
         return float("nan")
-    x = np.log([r.seconds for r in rows])
+    x = np.log([r.samples for r in rows])
     y = np.log([r.rmse for r in rows])
     return float(np.polyfit(x, y, 1)[0])
+
+
+def _equal_error_ratio(slow: list[Row], fast: list[Row]) -> tuple[float, float, bool]:
+    """(target rmse, time ratio slow/fast, extrapolated) at the lowest error both reach.
+
+    Without overlap of their error ranges, the target is the slow method's lowest
+    error and the fast method's time is extrapolated (flagged).
+    """
+    lo = max(min(r.rmse for r in slow), min(r.rmse for r in fast))
+    hi = min(max(r.rmse for r in slow), max(r.rmse for r in fast))
+    target = lo if lo <= hi else min(r.rmse for r in slow)
+    ts, xs = time_to_error(slow, target)
+    tf, xf = time_to_error(fast, target)
+    return target, ts / tf, xs or xf
 
 
 def summarize(rows: list[Row], extra: dict) -> str:
@@ -247,29 +261,23 @@ def summarize(rows: list[Row], extra: dict) -> str:
         for m, rs in by.items():
             for r in rs:
                 out.append(f"{METHODS[m]:<42}{r.samples:>5}{r.seconds:>10.2f}{r.rmse:>12.5f}")
-        slopes = ", ".join(f"{m} {_fit_slope(rs):+.2f}" for m, rs in by.items() if rs)
-        out.append(f"log-log slope of rmse against seconds: {slopes}")
-        mesh = [m for m in ("naive-random", "pbrt-random", "povlens-sobol") if by[m]]
-        if by.get("povlens-sobol") and len(mesh) > 1:
-            # The lowest error every mesh method reached in this run.
-            target = max(min(r.rmse for r in by[m]) for m in mesh)
-            times = {m: time_to_error(by[m], target) for m in mesh}
-            tc, xc = times["povlens-sobol"]
-            parts = []
-            for m in mesh:
-                t, x = times[m]
-                parts.append(f"{m} {t:.2f} s{' (extrapolated)' if x else ''}")
-            out.append(f"time to rmse {target:.5f} (interpolated in log-log): " + ", ".join(parts))
+        slopes = ", ".join(f"{m} {_slope_in_samples(rs):+.2f}" for m, rs in by.items() if rs)
+        out.append(f"log-log slope of rmse against N: {slopes}")
+        if by.get("povlens-sobol"):
             for m in ("naive-random", "pbrt-random"):
-                if m in times:
-                    t, x = times[m]
-                    flag = " (extrapolated)" if x or xc else ""
-                    out.append(f"  {m} / povlens-sobol: {t / tc:.1f}x the time for equal "
-                               f"error{flag}")
+                if by.get(m):
+                    target, ratio, x = _equal_error_ratio(by[m], by["povlens-sobol"])
+                    out.append(f"time to equal rmse {target:.5f} (log-log interpolation): "
+                               f"{m} / povlens-sobol = {ratio:.1f}x"
+                               f"{' (extrapolated)' if x else ''}")
         if by.get("focal-blur"):
-            best = min(by["focal-blur"], key=lambda r: r.rmse)
+            fb = by["focal-blur"]
+            best = min(fb, key=lambda r: r.rmse)
+            still = len(fb) > 1 and fb[-1].rmse < 0.8 * fb[-2].rmse
             nv = info.get("focal_blur_rmse_no_vignetting")
-            line = (f"(d) focal_blur error floor: rmse {best.rmse:.5f} at N = {best.samples} "
+            line = (f"(d) focal_blur error floor: "
+                    f"{'none yet, still falling; ' if still else ''}"
+                    f"rmse {best.rmse:.5f} at N = {best.samples} "
                     f"({best.rmse / max(info.get('reference_mean', 1.0), 1e-300):.1%} of the mean "
                     f"pixel value)")
             if nv is not None:
@@ -277,7 +285,8 @@ def summarize(rows: list[Row], extra: dict) -> str:
             if by.get("povlens-sobol"):
                 c = by["povlens-sobol"]
                 below = [r for r in c if r.rmse < best.rmse]
-                line += ("; (c) is below it from N = " + str(below[0].samples) if below
+                line += ("; (c) is below it from N = " + str(below[0].samples)
+                         + f" ({below[0].seconds:.2f} s against {best.seconds:.2f} s)" if below
                          else "; (c) never gets below it here")
             out.append(line)
     return "\n".join(out)

@@ -28,7 +28,7 @@ def test_bench_quick_tiny(tmp_path, capsys):
     c = {int(r["samples"]): float(r["rmse"]) for r in rows if r["method"] == "povlens-sobol"}
     assert c[16] < c[4]
     assert (tmp_path / "time_error_quick.png").stat().st_size > 0
-    assert "time to rmse" in (tmp_path / "time_error_quick.txt").read_text()
+    assert "time to equal rmse" in (tmp_path / "time_error_quick.txt").read_text()
     assert "focal_blur error floor" in capsys.readouterr().out
 
 
