@@ -367,11 +367,18 @@ class _Folder:
         return read_image(path)[..., :3].astype(np.float64)
 
     def _mesh(self) -> np.ndarray | None:
+        """The mesh render, composited with its vignetting divided out (POV-Ray's pinhole
+        and focal_blur cameras have none, so differences then show geometry and blur)."""
         from .images import read_image
+        from .render import composite_outdir
         path = self.dir / "image.exr"
         if self.plan["inputs"]["method"] != "mesh" or not path.exists():
             return None
-        return read_image(path)[..., :3].astype(np.float64)
+        try:
+            return composite_outdir(self.dir, vignetting=False, write=False)
+        except PovlensError:  # samples gone: fall back to the image as composited
+            self.mesh_vignetting = self.plan["inputs"].get("vignetting", True)
+            return read_image(path)[..., :3].astype(np.float64)
 
     def renders_section(self) -> tuple[str, np.ndarray | None]:
         views = {"pinhole": self._view("pinhole"), "focal_blur (equivalent thin lens)":
@@ -408,8 +415,8 @@ class _Folder:
             cells.append(f"<figure>{_img(_array_uri(rgb), 'difference ' + name, 'render')}"
                          f"<figcaption>|mesh − {_esc(name)}| (max over RGB; scale 0 to "
                          f"{used:.3g})</figcaption></figure>")
-        vig = ("with the lens's vignetting" if self.plan["inputs"].get("vignetting", True)
-               else "vignetting divided out")
+        vig = ("with the lens's vignetting" if getattr(self, "mesh_vignetting", False)
+               else "with the lens's vignetting divided out (POV-Ray's cameras have none)")
         return ("<h4>Errors against the mesh render</h4>"
                 f"<p>Linear light, RGB; the mesh render is composited {vig}.</p>"
                 + _table(["image", "RMSE", "PSNR (peak 1)", "mean |error|", "max |error|"], rows)
