@@ -215,8 +215,19 @@ def make_plan(opts: ConvertOptions) -> dict:
     }
 
 
+def _write_if_changed(path: Path, text: str) -> None:
+    """Write atomically, but leave an identical file alone (make compares mtimes)."""
+    try:
+        if path.read_text() == text:
+            return
+    except OSError:
+        pass
+    write_text(path, text)
+
+
 def _write_json(path: Path, obj) -> None:
-    write_text(path, json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n")
+    _write_if_changed(path, json.dumps(obj, indent=2, allow_nan=False, default=_json_default)
+                      + "\n")
 
 
 def _json_default(o):
@@ -274,19 +285,18 @@ def convert(opts: ConvertOptions) -> dict:
         _invalidate_outputs(out)
     scene_inc = _scene_include(plan, out)
     cam = plan["povray_camera"]
-    write_text(out / "pinhole.pov", pinhole_wrapper(scene_inc, cam["location"], cam["direction"],
-                                                    cam["right"], cam["up"]))
-    write_text(out / "focal_blur.pov", focal_blur_wrapper(
+    _write_if_changed(out / "pinhole.pov", pinhole_wrapper(
+        scene_inc, cam["location"], cam["direction"], cam["right"], cam["up"]))
+    _write_if_changed(out / "focal_blur.pov", focal_blur_wrapper(
         scene_inc, cam["location"], cam["direction"], cam["right"], cam["up"],
         aperture=cam["aperture"], focal_distance=cam["focal_distance"],
         blur_samples=opts.samples))
     if opts.method == "mesh":
         (out / "samples").mkdir(exist_ok=True)
         for b, _ in enumerate(plan["batches"]):
-            write_text(out / "samples" / f"batch_{b:03d}.pov", _batch_wrapper(plan, out, b))
-    write_text(out / "Makefile", _makefile(plan))
-    if old is None or old != _sanitize(plan):
-        _write_json(out / "plan.json", _sanitize(plan))
+            _write_if_changed(out / "samples" / f"batch_{b:03d}.pov", _batch_wrapper(plan, out, b))
+    _write_if_changed(out / "Makefile", _makefile(plan))
+    _write_json(out / "plan.json", _sanitize(plan))
     return plan
 
 
