@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import UsageError
-from .common import positive_float
+from .common import positive_float, positive_int
 
 
 def _counts(text: str) -> tuple[int, ...]:
@@ -18,14 +18,6 @@ def _counts(text: str) -> tuple[int, ...]:
     return v
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"'{text}' must be at least 1")
-    return v
 
 
 def register(sub) -> None:
@@ -42,12 +34,12 @@ def register(sub) -> None:
                                     "telephoto.250mm; quick: dgauss.50mm)")
     p.add_argument("--samples", type=_counts, metavar="N,N,...",
                    help="sample counts (default 4,8,16,32,64; quick: 4,8,16)")
-    p.add_argument("--reference-samples", type=_positive_int, metavar="N",
+    p.add_argument("--reference-samples", type=positive_int, metavar="N",
                    help="samples of the reference (default 256; quick: 64)")
-    p.add_argument("--width", type=_positive_int, help="image width (default 80; quick: 48)")
-    p.add_argument("--height", type=_positive_int, help="image height (default 60; quick: 36)")
-    p.add_argument("--jobs", type=_positive_int, help="parallel POV-Ray jobs (default: cores)")
-    p.add_argument("--pbrt-rays", type=_positive_int, metavar="N",
+    p.add_argument("--width", type=positive_int, help="image width (default 80; quick: 48)")
+    p.add_argument("--height", type=positive_int, help="image height (default 60; quick: 36)")
+    p.add_argument("--jobs", type=positive_int, help="parallel POV-Ray jobs (default: cores)")
+    p.add_argument("--pbrt-rays", type=positive_int, metavar="N",
                    help="rays per interval of the pbrt boxes (default 65536; quick: 16384)")
     p.add_argument("--tracer-rays", type=int, metavar="N",
                    help="rays for the tracer throughput (0 skips it; default 200000)")

@@ -16,7 +16,7 @@ from ..focus import UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_m
 from ..paraxial import paraxial_data
 from ..pupil import DEFAULT_TOLERANCE, build_pupil_table, load_if_current, plot_pupil_shapes
 from ..pupil_baselines import PBRT_INTERVALS, PBRT_RAYS_PER_INTERVAL, NaiveRearElement, PbrtBoxes
-from .common import add_lens_arguments, load_lens, positive_float, print_json
+from .common import add_lens_arguments, load_lens, positive_float, positive_int, print_json
 
 
 def register(sub) -> None:
@@ -47,13 +47,13 @@ def register(sub) -> None:
                         f"(default {DEFAULT_TOLERANCE})")
     p.add_argument("--plane", choices=["exit-pupil", "rear-vertex"], default="exit-pupil",
                    help="sampling plane of the table (default exit-pupil)")
-    p.add_argument("--bands", type=_positive_int, default=8, metavar="N",
+    p.add_argument("--bands", type=positive_int, default=8, metavar="N",
                    help="film-radius bands in the comparison (default 8)")
-    p.add_argument("--radii-per-band", type=_positive_int, default=4, metavar="N",
+    p.add_argument("--radii-per-band", type=positive_int, default=4, metavar="N",
                    help="film radii measured in each band (default 4)")
-    p.add_argument("--samples", type=_positive_int, default=1024, metavar="N",
+    p.add_argument("--samples", type=positive_int, default=1024, metavar="N",
                    help="Sobol samples per film radius for the pass fractions (default 1024)")
-    p.add_argument("--pbrt-rays", type=_positive_int, default=1 << 14, metavar="N",
+    p.add_argument("--pbrt-rays", type=positive_int, default=1 << 14, metavar="N",
                    help="rays per interval for the pbrt-style boxes (default 16384; pbrt "
                         "uses 1048576 -- its build time is then estimated)")
     p.add_argument("--no-compare", action="store_true",
@@ -67,15 +67,6 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _positive_int(text: str) -> int:
-    import argparse
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"'{text}' must be at least 1")
-    return v
 
 
 _SUFFIX = re.compile(r"^\s*([-+0-9.eE]+)\s*(mm|cm|m|in)?\s*$")
