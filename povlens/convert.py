@@ -46,7 +46,7 @@ from .thin_lens import fit_thin_lens, measure_model_error
 
 __all__ = ["ConvertOptions", "make_plan", "convert", "read_plan", "METHODS"]
 
-METHODS = ("pinhole", "focal-blur", "mesh")
+METHODS = ("auto", "pinhole", "focal-blur", "mesh")
 PLAN_VERSION = 1
 
 
@@ -75,6 +75,8 @@ class ConvertOptions:
     real_focus: bool = True            # film at the real-ray focus (else thick lens)
     vignetting: bool = True            # composite keeps the lens's vignetting
     jitter: bool = True                # film points jittered within each pixel (box filter)
+    tolerance_px: float = 0.5          # method "auto": error budget in pixels
+    auto_samples: bool = True          # method "auto": the decision sets the sample count
 
 
 def _unit(v) -> np.ndarray:
@@ -128,7 +130,17 @@ def _focus(lens, p, focus_from_pupil_mm: float, real: bool):
 
 
 def make_plan(opts: ConvertOptions) -> dict:
-    """Derive every number of a conversion; pure apart from reading the inputs."""
+    """Derive every number of a conversion; pure apart from reading the inputs.
+
+    ``method="auto"`` needs renders (a depth probe): use :func:`convert`."""
+    if opts.method == "auto":
+        raise UsageError("make_plan: --method auto is decided by convert() (it renders a "
+                         "depth probe)", "call convert(), or give a concrete method")
+    return _make_plan(opts)[0]
+
+
+def _make_plan(opts: ConvertOptions):
+    """(plan, lens, model, film) of ``opts`` (a concrete method)."""
     if opts.method not in METHODS:
         raise UsageError(f"--method {opts.method}: unknown method", f"use one of {', '.join(METHODS)}")
     if opts.units not in UNITS_MM:
@@ -212,7 +224,7 @@ def make_plan(opts: ConvertOptions) -> dict:
                    "drop_top_rows": drop},
         "sink_centre": default_sink_centre(loc, fwd).tolist(),
         "batches": batches,
-    }
+    }, lens, model, film
 
 
 def _write_if_changed(path: Path, text: str) -> None:
@@ -274,7 +286,29 @@ def convert(opts: ConvertOptions) -> dict:
     """Write OUTDIR (plan.json, wrappers, Makefile) and return the plan."""
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
+    decision = None
+    requested = opts
+    if opts.method == "auto":
+        from .auto_plan import choose_method
+        if not (opts.tolerance_px > 0 and math.isfinite(opts.tolerance_px)):
+            raise UsageError(f"--tolerance {opts.tolerance_px}: must be a positive number of "
+                             "pixels")
+        base = dataclasses.replace(opts, method="mesh")
+        plan0, lens, model, film = _make_plan(base)       # validates the inputs first
+        decision = choose_method(base, plan0, model, lens, film)
+        samples = decision["samples"] if opts.auto_samples else opts.samples
+        if not opts.auto_samples:
+            decision["reasons"].append(f"--samples {opts.samples} given: it replaces the "
+                                       f"decision's {decision['samples']}")
+        opts = dataclasses.replace(opts, method=decision["method"], samples=samples)
     plan = make_plan(opts)
+    if decision is not None:
+        # inputs.method is the method rendered (render, Makefile and report read it);
+        # requested_method records that it was chosen automatically.
+        plan["inputs"]["requested_method"] = "auto"
+        plan["inputs"]["tolerance_px"] = requested.tolerance_px
+        plan["inputs"]["auto_samples"] = requested.auto_samples
+        plan["decision"] = decision
     old = None
     if (out / "plan.json").exists():
         try:

@@ -15,7 +15,7 @@ import sys
 from ..errors import PovlensError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ["inspect", "focus", "trace", "check", "render", "pupil", "compare", "bench", "report"]
+COMMANDS = ["inspect", "focus", "trace", "check", "plan", "render", "pupil", "compare", "bench", "report"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -38,11 +38,15 @@ def _add_convert_arguments(p) -> None:
                    help="what one scene unit is (default m)")
     p.add_argument("--width", type=int, default=160, help="image width in pixels (default 160)")
     p.add_argument("--height", type=int, default=120, help="image height in pixels (default 120)")
-    p.add_argument("--method", choices=METHODS, default="mesh",
-                   help="pinhole, focal-blur (equivalent thin lens) or mesh (exact lens rays "
-                        "per sample; default)")
-    p.add_argument("--samples", type=int, default=16,
-                   help="lens samples per pixel (mesh renders, or focal_blur's blur_samples)")
+    p.add_argument("--method", choices=METHODS, default="auto",
+                   help="auto (default: the cheapest method within --tolerance, decided from a "
+                        "depth probe of the scene and the measured model error), pinhole, "
+                        "focal-blur (equivalent thin lens) or mesh (exact lens rays per sample)")
+    p.add_argument("--tolerance", type=positive_float, default=0.5, metavar="PX",
+                   help="error budget of --method auto, in pixels (default 0.5)")
+    p.add_argument("--samples", type=int, default=None,
+                   help="lens samples per pixel (mesh renders, or focal_blur's blur_samples); "
+                        "default: chosen by --method auto, else 16")
     p.add_argument("--batch-size", type=int, default=None,
                    help="lens samples per POV-Ray process (default: samples / cores, so "
                         "each core runs one process)")
@@ -67,7 +71,7 @@ def _add_convert_arguments(p) -> None:
 def options_from_args(args) -> ConvertOptions:
     if args.width < 1 or args.height < 1:
         raise UsageError(f"--width/--height {args.width}x{args.height}: must be at least 1 pixel")
-    if args.samples < 1:
+    if args.samples is not None and args.samples < 1:
         raise UsageError(f"--samples {args.samples}: must be at least 1")
     if args.batch_size is not None and args.batch_size < 1:
         raise UsageError(f"--batch-size {args.batch_size}: must be at least 1")
@@ -77,10 +81,11 @@ def options_from_args(args) -> ConvertOptions:
         film_diagonal_mm=args.film_diagonal,
         film_size_mm=parse_film_size(args.film_size) if args.film_size else None,
         units=args.units, width=args.width, height=args.height, method=args.method,
-        samples=args.samples, batch_size=args.batch_size, seed=args.seed,
+        samples=16 if args.samples is None else args.samples, batch_size=args.batch_size, seed=args.seed,
         location=args.location, look_at=args.look_at, sky=args.sky,
         real_focus=not args.thick_lens_focus, vignetting=not args.no_vignetting,
-        jitter=not args.no_jitter)
+        jitter=not args.no_jitter, tolerance_px=args.tolerance,
+        auto_samples=args.samples is None)
 
 
 def _summary(plan: dict) -> str:
@@ -96,7 +101,9 @@ def _summary(plan: dict) -> str:
         f"model error: distortion <= {e['max_distortion_px']:.3f} px, blur size <= "
         f"{e['max_blur_size_error_px']:.3f} px, illumination >= "
         f"{e['min_relative_illumination']:.3f} of the centre",
-        f"method {plan['inputs']['method']}, {plan['inputs']['samples']} samples",
+        f"method {plan['inputs']['method']}, {plan['inputs']['samples']} samples"
+        + (" (chosen by --method auto: " + plan["decision"]["reasons"][-1].removeprefix("-> ")
+           + ")" if "decision" in plan else ""),
     ])
 
 

@@ -1,0 +1,229 @@
+"""``--method auto``: choose the cheapest render method within an error budget.
+
+The choice is made from measurements, not guesses:
+
+1. **Depth range** — :func:`measure_depth_range` converts the scene as
+   ``pinhole`` into a small temporary probe folder (at most 64 pixels wide, same
+   film in mm) and runs :func:`povlens.depth_probe.probe_depth` (two fogged
+   POV-Ray renders).  Near and far are robust percentiles (1st / 99th) of the
+   axial distances of the pixels that hit something; if more than 1 % of the
+   pixels see background, far is infinity.  Depths are converted to camera-frame
+   z in mm (the thin-lens model's frame: ``centre_z_mm + axial distance``).
+2. **Model error over that range** — :func:`povlens.thin_lens.measure_model_error`
+   with the exact tracer through the pupil at depths spanning [near, far].
+3. **Decision** — :func:`decide`, pure:
+
+   * ``pinhole`` when the thin-lens circle of confusion over [near, far], the
+     real spot size (aberrations), the distortion and the vignetting all stay
+     under the budget (a pinhole camera has the model's projection too);
+   * ``focal-blur`` when the real lens's deviations from the equivalent thin lens
+     stay under the budget: distortion (px), blur-size error (px), blur shape
+     (``(elongation - 1) x real blur`` px) and vignetting (POV-Ray's focal_blur
+     has none: a relative illumination below ``1 - VIGNETTING_TOLERANCE``
+     anywhere in the field is a deviation unless vignetting is not wanted,
+     ``--no-vignetting``);
+   * ``mesh`` otherwise.
+
+   **Samples.**  With N stratified lens samples, the N copies of a point blurred
+   into a disc of diameter b pixels lie about ``b sqrt(pi/4) / sqrt(N)`` pixels
+   apart.  The target noise is that these copies are at most
+   :data:`SAMPLE_SPACING_PX` (1 pixel) apart, so they blend instead of showing
+   as separate copies / structured noise:
+   ``N = clamp(ceil(K b_max^2), 8, 256)`` with ``K = (pi/4) / SAMPLE_SPACING_PX^2``
+   and b_max the largest blur in pixels (real or model) over the depth range.
+   Pinhole renders use 1 sample.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["decide", "blur_range_px", "measure_depth_range", "choose_method",
+           "model_depths", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "VIGNETTING_TOLERANCE"]
+
+#: Largest spacing in pixels between the film copies of one blurred point (target noise).
+SAMPLE_SPACING_PX = 1.0
+#: Samples per squared pixel of blur diameter: (pi/4) / spacing^2.
+SAMPLE_K = (math.pi / 4) / SAMPLE_SPACING_PX ** 2
+MIN_SAMPLES, MAX_SAMPLES = 8, 256
+#: Relative illumination below 1 - this counts as vignetting focal_blur cannot render.
+VIGNETTING_TOLERANCE = 0.05
+#: Probe image width (pixels) and percentiles for near / far.
+PROBE_WIDTH = 64
+NEAR_PERCENTILE, FAR_PERCENTILE = 1.0, 99.0
+#: Far is infinity when more than this fraction of the probe's pixels see background.
+BACKGROUND_FRACTION = 0.01
+
+
+def blur_range_px(model, near_z_mm: float, far_z_mm: float, pixel_pitch_mm: float) -> dict:
+    """Thin-lens blur diameter in pixels at near, far and its max / min over the range.
+
+    The blur |d - s| / d is monotone on each side of the focus s, so its maximum
+    over [near, far] is at an end (far = inf: the limit pupil v / s)."""
+    s = model.focus_distance_mm
+
+    def blur(z):
+        if math.isinf(z):
+            v = model.pupil_diameter_mm * model.image_distance_mm / s if math.isfinite(s) else 0.0
+        else:
+            v = float(model.blur_diameter_mm(np.array([z]))[0])
+        return v / pixel_pitch_mm
+
+    bn, bf = blur(near_z_mm), blur(far_z_mm)
+    focus_z = model.focus_z_mm
+    inside = near_z_mm <= focus_z <= far_z_mm
+    return {"near_px": bn, "far_px": bf, "max_px": max(bn, bf),
+            "min_px": 0.0 if inside else min(bn, bf), "focus_inside_range": bool(inside)}
+
+
+def model_depths(model, near_z_mm: float, far_z_mm: float, n: int = 5) -> list[float]:
+    """Camera-frame depths (mm) spanning [near, far], geometric in distance from the
+    centre of projection, plus the plane in focus; far = inf -> 1e4 x near (or focus)."""
+    c = model.centre_z_mm
+    dn = max(near_z_mm - c, 1e-3)
+    if math.isinf(far_z_mm):
+        ref = model.focus_distance_mm if math.isfinite(model.focus_distance_mm) else dn
+        df = max(1e4 * max(dn, ref), 1e6)
+    else:
+        df = max(far_z_mm - c, dn)
+    d = set(np.geomspace(dn, df, n).tolist()) if df > dn else {dn}
+    if math.isfinite(model.focus_distance_mm) and dn <= model.focus_distance_mm <= df:
+        d.add(model.focus_distance_mm)
+    return [c + x for x in sorted(d)]
+
+
+def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
+           pixel_pitch_mm: float, tolerance_px: float = 0.5, vignetting: bool = True) -> dict:
+    """Pure decision: {method, samples, reasons, numbers}.
+
+    ``model_error`` is :func:`povlens.thin_lens.measure_model_error` measured at
+    depths spanning [near, far] (camera-frame mm); ``vignetting`` False means the
+    lens's vignetting is not wanted in the image (``--no-vignetting``)."""
+    tol = float(tolerance_px)
+    blur = blur_range_px(model, near_z_mm, far_z_mm, pixel_pitch_mm)
+    e = model_error
+    real = np.asarray(e["blur_real_px"], dtype=float)
+    elong = np.asarray(e["elongation"], dtype=float)
+    shape_err = float(np.max((elong - 1.0) * real)) if real.size else 0.0
+    max_real = float(real.max()) if real.size else 0.0
+    dist = float(e["max_distortion_px"])
+    size_err = float(e["max_blur_size_error_px"])
+    illum = float(e["min_relative_illumination"])
+    vignetted = illum < 1.0 - VIGNETTING_TOLERANCE
+    numbers = {
+        "tolerance_px": tol,
+        "near_z_mm": near_z_mm, "far_z_mm": far_z_mm,
+        "near_distance_mm": near_z_mm - model.centre_z_mm,
+        "far_distance_mm": far_z_mm - model.centre_z_mm,
+        "blur_near_px": blur["near_px"], "blur_far_px": blur["far_px"],
+        "max_model_blur_px": blur["max_px"], "max_real_blur_px": max_real,
+        "max_distortion_px": dist, "max_blur_size_error_px": size_err,
+        "max_elongation": float(e["max_elongation"]), "max_shape_error_px": shape_err,
+        "min_relative_illumination": illum, "vignetting_wanted": bool(vignetting),
+        "model_depths_z_mm": list(e.get("object_z_mm", [])),
+        "sample_k": SAMPLE_K,
+    }
+    reasons = []
+
+    def check(name, value, limit, unit="px"):
+        ok = value < limit
+        reasons.append(f"{name} {value:.3g} {unit} {'<' if ok else '>='} {limit:.3g} {unit}")
+        return ok
+
+    vig_ok = not (vignetted and vignetting)
+    vig_text = (f"relative illumination >= {illum:.3f} of the centre "
+                f"({'below' if vignetted else 'not below'} {1 - VIGNETTING_TOLERANCE:.2f})")
+    if vignetted and not vignetting:
+        vig_text += "; vignetting not wanted (--no-vignetting), so not a deviation"
+    elif vignetted:
+        vig_text += "; POV-Ray's pinhole and focal_blur cameras have none: a deviation"
+
+    reasons.append(f"depth range {numbers['near_distance_mm'] / 1000:.3g} m to "
+                   + ("infinity" if math.isinf(far_z_mm)
+                      else f"{numbers['far_distance_mm'] / 1000:.3g} m")
+                   + f" from the entrance pupil; focus "
+                   + ("inside" if blur["focus_inside_range"] else "outside") + " the range")
+    pin = [check("pinhole: max thin-lens blur", blur["max_px"], tol),
+           check("pinhole: max real spot", max_real, tol),
+           check("pinhole: max distortion", dist, tol)]
+    reasons.append("pinhole: " + vig_text)
+    if all(pin) and vig_ok:
+        reasons.append("-> pinhole: every deviation from a sharp pinhole view is under the budget")
+        return {"method": "pinhole", "samples": 1, "reasons": reasons, "numbers": numbers}
+    b_max = max(blur["max_px"], max_real)
+    samples = int(min(MAX_SAMPLES, max(MIN_SAMPLES, math.ceil(SAMPLE_K * b_max ** 2))))
+    numbers["max_blur_px"] = b_max
+    fb = [check("focal-blur: max distortion", dist, tol),
+          check("focal-blur: max blur size error", size_err, tol),
+          check("focal-blur: max blur shape error (elongation - 1) x blur", shape_err, tol)]
+    reasons.append("focal-blur: " + vig_text)
+    if all(fb) and vig_ok:
+        reasons.append(f"-> focal-blur: the equivalent thin lens is within the budget; "
+                       f"{samples} blur samples for a {b_max:.3g} px blur "
+                       f"(N = ceil({SAMPLE_K:.3g} b^2), clamped to {MIN_SAMPLES}..{MAX_SAMPLES})")
+        return {"method": "focal-blur", "samples": samples, "reasons": reasons, "numbers": numbers}
+    reasons.append(f"-> mesh: the real lens deviates from the equivalent thin lens beyond the "
+                   f"budget; {samples} samples for a {b_max:.3g} px blur "
+                   f"(N = ceil({SAMPLE_K:.3g} b^2), clamped to {MIN_SAMPLES}..{MAX_SAMPLES})")
+    return {"method": "mesh", "samples": samples, "reasons": reasons, "numbers": numbers}
+
+
+def _depth_limits(axial_mm: np.ndarray) -> tuple[float, float, dict]:
+    """Near / far axial distances (mm) from a probe's per-pixel axial distances."""
+    a = np.asarray(axial_mm, dtype=float).ravel()
+    finite = a[np.isfinite(a) & (a > 0)]
+    bg = 1.0 - finite.size / max(a.size, 1)
+    info = {"probe_pixels": int(a.size), "background_fraction": float(bg)}
+    if finite.size == 0:
+        return math.inf, math.inf, info
+    near = float(np.percentile(finite, NEAR_PERCENTILE))
+    far = math.inf if bg > BACKGROUND_FRACTION else float(np.percentile(finite, FAR_PERCENTILE))
+    info.update({"closest_mm": float(finite.min()), "farthest_finite_mm": float(finite.max())})
+    return near, far, info
+
+
+def measure_depth_range(opts, film, threads: int | None = None) -> tuple[float, float, dict]:
+    """Near / far axial distances (mm, from the camera location = entrance pupil) of
+    what the scene shows, from a small pinhole depth probe in a temporary folder."""
+    from .convert import convert, read_plan
+    from .depth_probe import axial_depth, probe_depth
+    pw = min(PROBE_WIDTH, film.width_px)
+    ph = max(2, round(pw * film.height_px / film.width_px))
+    out = Path(opts.outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=".probe.", dir=out) as tmp:
+        popts = dataclasses.replace(opts, outdir=tmp, method="pinhole", samples=1,
+                                    width=pw, height=ph,
+                                    film_size_mm=(film.width_mm, film.height_mm))
+        convert(popts)
+        plan = read_plan(tmp)
+        d = probe_depth(tmp, threads=threads)
+        axial = axial_depth(plan, d) * plan["mm_per_unit"]
+    near, far, info = _depth_limits(axial)
+    info.update({"probe_width": pw, "probe_height": ph})
+    return near, far, info
+
+
+def choose_method(opts, plan: dict, model, lens, film) -> dict:
+    """Measure the scene's depth range and the model error over it, and decide.
+
+    ``plan`` / ``model`` / ``lens`` / ``film`` are those of ``opts`` (any method)."""
+    from .thin_lens import measure_model_error
+    near_d, far_d, info = measure_depth_range(opts, film)
+    if math.isinf(near_d):  # nothing but background: everything at infinity
+        near_d = 1e4 * max(model.focus_distance_mm if math.isfinite(model.focus_distance_mm)
+                           else 1e3, 1e3)
+    c = model.centre_z_mm
+    near_z, far_z = c + near_d, c + far_d
+    depths = model_depths(model, near_z, far_z)
+    err = measure_model_error(lens, plan["focus"]["film_distance_mm"], model, film, depths)
+    d = decide(near_z_mm=near_z, far_z_mm=far_z, model=model, model_error=err,
+               pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.tolerance_px,
+               vignetting=opts.vignetting)
+    d["numbers"]["depth_probe"] = info
+    return d

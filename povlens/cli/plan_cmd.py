@@ -1,0 +1,64 @@
+"""``povlens plan SCENE --lens LENS --focus D``: the render method --method auto chooses."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tempfile
+
+from ..convert import _sanitize, convert
+from .common import print_json
+from .render_cmd import _add_convert_arguments, options_from_args
+
+
+def register(sub) -> None:
+    p = sub.add_parser("plan", help="choose the render method and samples for a scene (auto)",
+                       description="Measure the scene's depth range with a small POV-Ray depth "
+                                   "probe and the equivalent thin lens's error over it with the "
+                                   "exact tracer, and print the cheapest method within "
+                                   "--tolerance (pinhole, focal-blur or mesh), its sample count "
+                                   "and the numbers behind the choice.  With -o, OUTDIR is "
+                                   "written as by 'convert --method auto' (plan.json records the "
+                                   "decision).")
+    _add_convert_arguments(p)
+    for a in p._actions:             # -o is optional here; --method is always auto
+        if a.dest == "outdir":
+            a.required = False
+    p.set_defaults(func=run, method="auto")
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return "inf" if math.isinf(v) else f"{v:.4g}"
+    return str(v)
+
+
+def run(args) -> int:
+    args.method = "auto"
+    if args.outdir:
+        plan = convert(options_from_args(args))
+    else:
+        with tempfile.TemporaryDirectory(prefix="povlens-plan.") as tmp:
+            args.outdir = tmp
+            plan = convert(options_from_args(args))
+            args.outdir = None
+    d = plan["decision"]
+    if args.json:
+        print_json(_sanitize({"method": d["method"], "samples": plan["inputs"]["samples"],
+                    "decision": d, "outdir": args.outdir}))
+        return 0
+    print(f"{plan['inputs']['lens']}  f/{plan['lens']['f_number']:.3g}  focus "
+          f"{plan['inputs']['focus']:g} {plan['inputs']['units']}  "
+          f"{plan['inputs']['width']}x{plan['inputs']['height']}  tolerance "
+          f"{plan['inputs']['tolerance_px']:g} px")
+    print(f"method {d['method']}, {plan['inputs']['samples']} samples")
+    for r in d["reasons"]:
+        print(f"  {r}")
+    print("numbers:")
+    for k, v in d["numbers"].items():
+        if isinstance(v, (list, dict)):
+            continue
+        print(f"  {k:28s} {_fmt(v)}")
+    if args.outdir:
+        print(f"wrote {args.outdir}/plan.json; render with 'make -C {args.outdir}'")
+    return 0
