@@ -221,7 +221,10 @@ def choose_method(opts, plan: dict, model, lens, film) -> dict:
     c = model.centre_z_mm
     near_z, far_z = c + near_d, c + far_d
     depths = model_depths(model, near_z, far_z)
-    err = measure_model_error(lens, plan["focus"]["film_distance_mm"], model, film, depths)
+    from .pupil import build_pupil_table
+    fd = plan["focus"]["film_distance_mm"]
+    table = build_pupil_table(lens, fd, film.half_diagonal_mm)  # exact vignetting
+    err = measure_model_error(lens, fd, model, film, depths, pupil_table=table)
     d = decide(near_z_mm=near_z, far_z_mm=far_z, model=model, model_error=err,
                pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.tolerance_px,
                vignetting=opts.vignetting)

@@ -42,6 +42,7 @@ from .mesh_camera import (SINK_RADIUS, _pov_string, _template, _vec, default_sin
                           focal_blur_wrapper, pinhole_wrapper, render_size, write_text)
 from .prescription import read_lens
 from .scene_camera import parse_scene_camera
+from .pupil import build_pupil_table
 from .thin_lens import fit_thin_lens, measure_model_error
 
 __all__ = ["ConvertOptions", "make_plan", "convert", "read_plan", "METHODS"]
@@ -173,7 +174,9 @@ def _make_plan(opts: ConvertOptions):
     else:
         s = object_d - model.centre_z_mm
         depths = [model.centre_z_mm + k * s for k in (0.5, 1.0, 2.0, 10.0)]
-    model_error = measure_model_error(lens, film_d, model, film, depths)
+    # Vignetting from the exact exit-pupil table (built again, and saved, at render time).
+    table = build_pupil_table(lens, film_d, film.half_diagonal_mm)
+    model_error = measure_model_error(lens, film_d, model, film, depths, pupil_table=table)
 
     version = povray_version()
     rw, rh, drop = render_size(film.width_px, film.height_px, version)

@@ -168,19 +168,23 @@ def fit_thin_lens(lens: LensPrescription, film_distance_mm: float, focus_z_mm: f
 
 def measure_model_error(lens: LensPrescription, film_distance_mm: float,
                         model: EquivalentThinLens, film: Film, object_z_mm,
-                        n_field: int = 9, n_rings: int = 12) -> dict:
+                        n_field: int = 9, n_rings: int = 12, pupil_table=None) -> dict:
     """What the thin-lens model gets wrong, measured with the exact tracer.
 
     For object points at depths ``object_z_mm`` (camera-frame z) placed where
     the model images them at film heights 0..half diagonal (along the diagonal
-    direction), traces a bundle through the entrance pupil (1.3 x its diameter,
-    blocked rays dropped) to the film and compares with the model:
+    direction), traces a bundle to the film and compares with the model.  The
+    bundle fills a disc of 1.5 x the entrance-pupil diameter on the pupil plane,
+    centred where the real chief ray of that film height crosses it (the real
+    pupil moves off axis with the field); rays the lens blocks are dropped.
 
     * distortion: centroid of the real spot vs the model's image point (pixels);
     * blur size: real equivalent-disc diameter (2 sqrt(2) x RMS radius) vs the
       model's blur-disc diameter (pixels);
     * blur shape: elongation sqrt(l_max / l_min) of the spot's covariance;
-    * vignetting: fraction of the pupil bundle that passes, relative to the axis.
+    * vignetting: relative illumination E(h) / E(0) from ``pupil_table``
+      (:class:`povlens.pupil.PupilTable`, exact) when given, else the passing
+      fraction of the bundle relative to the axis.
 
     Returns a dict of per-(depth, field) arrays and their maxima, in pixels.
     """
@@ -188,9 +192,20 @@ def measure_model_error(lens: LensPrescription, film_distance_mm: float,
     depths = np.atleast_1d(np.asarray(object_z_mm, dtype=np.float64))
     hs = np.linspace(0.0, film.half_diagonal_mm, n_field)
     diag_dir = np.array([film.width_mm, film.height_mm]) / math.hypot(film.width_mm, film.height_mm)
-    disc = pupil_disc_points(n_rings) * (0.65 * model.pupil_diameter_mm)
+    disc = pupil_disc_points(n_rings) * (0.75 * model.pupil_diameter_mm)
     m = len(disc)
     ep_z = model.centre_z_mm
+    # Where the real chief ray of each film height crosses the entrance-pupil plane.
+    chief, found = chief_rays(lens, film_distance_mm, hs)
+    with np.errstate(all="ignore"):
+        t = (ep_z - chief.origin_mm[:, 2]) / chief.direction[:, 2]
+        x_c = chief.origin_mm[:, 0] + t * chief.direction[:, 0]
+    x_c = np.where(found & np.isfinite(x_c), x_c, 0.0)
+    centres = -x_c[:, None] * diag_dir[None, :]   # the film point lies along -diag_dir
+    relative_illumination = None
+    if pupil_table is not None:
+        e = np.asarray(pupil_table.irradiance_factor(hs), dtype=np.float64)
+        relative_illumination = e / e[0] if e[0] > 0 else np.zeros_like(e)
     out = {k: np.zeros((len(depths), n_field)) for k in
            ("distortion_px", "blur_real_px", "blur_model_px", "blur_size_error_px",
             "elongation", "relative_illumination")}
@@ -201,14 +216,16 @@ def measure_model_error(lens: LensPrescription, film_distance_mm: float,
             target_film = -hgt * diag_dir                     # model image point on the film
             tan = -target_film / model.image_distance_mm       # object direction from the EP
             obj = np.array([tan[0] * dist, tan[1] * dist, z])
-            pupil = np.column_stack([disc, np.full(m, ep_z)])
+            pupil = np.column_stack([disc + centres[b], np.full(m, ep_z)])
             direction = pupil - obj
             res = trace_from_scene(lens, film_distance_mm, np.tile(obj, (m, 1)), direction)
             o, d = res.origin_mm[res.passed], res.direction[res.passed]
             frac = len(o) / m
             if axis_pass is None:
                 axis_pass = max(frac, 1e-300)
-            out["relative_illumination"][a, b] = frac / axis_pass
+            out["relative_illumination"][a, b] = (frac / axis_pass
+                                                  if relative_illumination is None
+                                                  else relative_illumination[b])
             model_blur = float(model.blur_diameter_mm(np.array([z]))[0]) / pitch
             out["blur_model_px"][a, b] = model_blur
             if len(o) < 3:

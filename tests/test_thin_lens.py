@@ -72,3 +72,22 @@ def test_model_blur_diameter_formula():
     d, s = 1000.0 - m.centre_z_mm, 2000.0 - m.centre_z_mm
     expect = m.pupil_diameter_mm * abs(d - s) / d * m.image_distance_mm / s
     assert m.blur_diameter_mm(np.array([1000.0]))[0] == pytest.approx(expect)
+
+
+def test_vignetting_from_the_pupil_table_does_not_depend_on_the_stop_size():
+    """The bundle of a tiny stop's pupil is found around the real chief ray, and the
+    relative illumination comes from the exact pupil table: f/22 and f/64 agree."""
+    from povlens.paraxial import stopped_down
+    from povlens.pupil import build_pupil_table
+    film = Film.from_diagonal(35.0, 80, 60)
+    ri = []
+    for fno in (22.0, 64.0):
+        lens = stopped_down(read_lens(LENS_DIR / "dgauss.50mm.dat"), f_number=fno)
+        f = thick_lens_film_distance_mm(lens, 4000.0)
+        m = fit_thin_lens(lens, f, 4000.0, film)
+        t = build_pupil_table(lens, f, film.half_diagonal_mm)
+        e = measure_model_error(lens, f, m, film, [2000.0, 8000.0], pupil_table=t)
+        assert np.all(np.asarray(e["blur_real_px"]) > 0)  # every bundle found the pupil
+        ri.append(e["min_relative_illumination"])
+    assert ri[0] == pytest.approx(ri[1], abs=0.02)
+    assert 0.5 < ri[0] < 0.95  # natural (cos^4-like) fall-off at the corner remains
