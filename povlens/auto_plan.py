@@ -43,7 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["decide", "blur_range_px", "measure_depth_range", "choose_method",
+__all__ = ["decide", "blur_range_px", "measure_depth_range", "choose_method", "adaptive_rows",
+           "measure_depth_map", "sample_row_ranges",
            "model_depths", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "VIGNETTING_TOLERANCE"]
 
 #: Largest spacing in pixels between the film copies of one blurred point (target noise).
@@ -187,9 +188,10 @@ def _depth_limits(axial_mm: np.ndarray) -> tuple[float, float, dict]:
     return near, far, info
 
 
-def measure_depth_range(opts, film, threads: int | None = None) -> tuple[float, float, dict]:
-    """Near / far axial distances (mm, from the camera location = entrance pupil) of
-    what the scene shows, from a small pinhole depth probe in a temporary folder."""
+def measure_depth_map(opts, film, threads: int | None = None) -> np.ndarray:
+    """Per-pixel axial distances (mm, from the camera location = entrance pupil; inf
+    for background) of a small pinhole depth probe in a temporary folder
+    (at most :data:`PROBE_WIDTH` pixels wide, same film in mm)."""
     from .convert import convert, read_plan
     from .depth_probe import axial_depth, probe_depth
     pw = min(PROBE_WIDTH, film.width_px)
@@ -198,15 +200,81 @@ def measure_depth_range(opts, film, threads: int | None = None) -> tuple[float, 
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix=".probe.", dir=out) as tmp:
         popts = dataclasses.replace(opts, outdir=tmp, method="pinhole", samples=1,
-                                    width=pw, height=ph,
+                                    width=pw, height=ph, adaptive=False,
                                     film_size_mm=(film.width_mm, film.height_mm))
         convert(popts)
         plan = read_plan(tmp)
         d = probe_depth(tmp, threads=threads)
-        axial = axial_depth(plan, d) * plan["mm_per_unit"]
+        return axial_depth(plan, d) * plan["mm_per_unit"]
+
+
+def measure_depth_range(opts, film, threads: int | None = None,
+                        axial_mm: np.ndarray | None = None) -> tuple[float, float, dict]:
+    """Near / far axial distances (mm, from the camera location = entrance pupil) of
+    what the scene shows, from a small pinhole depth probe (:func:`measure_depth_map`,
+    or ``axial_mm`` if given)."""
+    axial = measure_depth_map(opts, film, threads) if axial_mm is None else axial_mm
     near, far, info = _depth_limits(axial)
-    info.update({"probe_width": pw, "probe_height": ph})
+    info.update({"probe_width": int(axial.shape[1]), "probe_height": int(axial.shape[0])})
     return near, far, info
+
+
+#: Adaptive sampling: rows per band, and the fewest samples any pixel gets.
+BAND_ROWS, ADAPTIVE_MIN_SAMPLES = 8, 4
+
+
+def adaptive_rows(model, axial_mm: np.ndarray, film, n_max: int, band_rows: int = BAND_ROWS,
+                  n_min: int = ADAPTIVE_MIN_SAMPLES) -> dict:
+    """Samples each band of ``band_rows`` image rows needs, from a depth probe.
+
+    Per probe pixel the thin-lens blur b (px of ``film``) at its depth; a row's blur
+    is the largest b of any probe pixel within b/2 + 1 rows of it (a blurred point
+    spreads over b rows, so light from a blurred neighbour counts too); a band's is
+    its rows' maximum; its samples ``clamp(ceil(SAMPLE_K b^2), n_min, n_max)``, the
+    rule of :func:`decide`.  Returns {band_rows, n_min, band_blur_px, band_samples}.
+    """
+    a = np.asarray(axial_mm, dtype=float)
+    ph = a.shape[0]
+    h = film.height_px
+    pitch = film.pixel_pitch_mm
+    s = model.focus_distance_mm
+    inf_blur = (model.pupil_diameter_mm * model.image_distance_mm / s / pitch
+                if math.isfinite(s) else 0.0)
+    blur = np.full(a.shape, inf_blur)
+    fin = np.isfinite(a) & (a > 0)
+    if fin.any():
+        blur[fin] = model.blur_diameter_mm(model.centre_z_mm + a[fin]) / pitch
+    probe_row_blur = blur.max(axis=1)                       # (ph,)
+    # film rows covered by probe row i: [i h / ph, (i + 1) h / ph)
+    row_blur = np.zeros(h)
+    for i, b in enumerate(probe_row_blur):
+        r0 = math.floor(i * h / ph)
+        r1 = math.ceil((i + 1) * h / ph)
+        reach = math.ceil(b / 2) + 1
+        lo, hi = max(0, r0 - reach), min(h, r1 + reach)
+        row_blur[lo:hi] = np.maximum(row_blur[lo:hi], b)
+    nb = math.ceil(h / band_rows)
+    band_blur = [float(row_blur[j * band_rows:(j + 1) * band_rows].max()) for j in range(nb)]
+    n_min = max(1, min(int(n_min), int(n_max)))
+    band_samples = [int(min(n_max, max(n_min, math.ceil(SAMPLE_K * b ** 2))))
+                    for b in band_blur]
+    return {"band_rows": int(band_rows), "n_min": n_min, "band_blur_px": band_blur,
+            "band_samples": band_samples}
+
+
+def sample_row_ranges(adaptive: dict, height: int) -> list[list[int]]:
+    """Film rows [start, end) each sample renders: samples below n_min the whole
+    frame, sample k the rows from the first to the last band needing more than k
+    samples (POV-Ray renders one row range per frame).  Length = max band samples."""
+    br, need = adaptive["band_rows"], adaptive["band_samples"]
+    rows = []
+    for k in range(max(need)):
+        if k < adaptive["n_min"]:
+            rows.append([0, height])
+            continue
+        bands = [j for j, n in enumerate(need) if n > k]
+        rows.append([bands[0] * br, min(height, (bands[-1] + 1) * br)])
+    return rows
 
 
 def choose_method(opts, plan: dict, model, lens, film) -> dict:
@@ -214,7 +282,8 @@ def choose_method(opts, plan: dict, model, lens, film) -> dict:
 
     ``plan`` / ``model`` / ``lens`` / ``film`` are those of ``opts`` (any method)."""
     from .thin_lens import measure_model_error
-    near_d, far_d, info = measure_depth_range(opts, film)
+    axial = measure_depth_map(opts, film)
+    near_d, far_d, info = measure_depth_range(opts, film, axial_mm=axial)
     if math.isinf(near_d):  # nothing but background: everything at infinity
         near_d = 1e4 * max(model.focus_distance_mm if math.isfinite(model.focus_distance_mm)
                            else 1e3, 1e3)
@@ -229,4 +298,6 @@ def choose_method(opts, plan: dict, model, lens, film) -> dict:
                pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.tolerance_px,
                vignetting=opts.vignetting)
     d["numbers"]["depth_probe"] = info
+    if getattr(opts, "adaptive", False):
+        d["adaptive"] = adaptive_rows(model, axial, film, d["samples"])
     return d

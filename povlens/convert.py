@@ -78,6 +78,7 @@ class ConvertOptions:
     jitter: bool = True                # film points jittered within each pixel (box filter)
     tolerance_px: float = 0.5          # method "auto": error budget in pixels
     auto_samples: bool = True          # method "auto": the decision sets the sample count
+    adaptive: bool = False             # mesh: fewer samples in sharp row bands (depth probe)
 
 
 def _unit(v) -> np.ndarray:
@@ -203,7 +204,7 @@ def _make_plan(opts: ConvertOptions):
             "width": opts.width, "height": opts.height, "method": opts.method,
             "samples": opts.samples, "batch_size": opts.batch_size, "seed": opts.seed,
             "real_focus": opts.real_focus, "vignetting": opts.vignetting,
-            "jitter": opts.jitter,
+            "jitter": opts.jitter, "adaptive": bool(opts.adaptive),
             "camera_from": cam_source,
         },
         "lens": {
@@ -304,7 +305,25 @@ def convert(opts: ConvertOptions) -> dict:
             decision["reasons"].append(f"--samples {opts.samples} given: it replaces the "
                                        f"decision's {decision['samples']}")
         opts = dataclasses.replace(opts, method=decision["method"], samples=samples)
+    adaptive = None
+    if opts.adaptive and opts.method == "mesh":
+        adaptive = decision.pop("adaptive", None) if decision is not None else None
+        if adaptive is None:
+            from .auto_plan import adaptive_rows, measure_depth_map
+            _, _, model, film = _make_plan(opts)
+            adaptive = adaptive_rows(model, measure_depth_map(opts, film), film, opts.samples)
+        else:
+            from .auto_plan import SAMPLE_K
+            n_min = min(adaptive["n_min"], opts.samples)
+            adaptive["n_min"] = n_min
+            adaptive["band_samples"] = [int(min(opts.samples, max(n_min, math.ceil(
+                SAMPLE_K * b ** 2)))) for b in adaptive["band_blur_px"]]
+        opts = dataclasses.replace(opts, samples=max(adaptive["band_samples"]))
+    elif decision is not None:
+        decision.pop("adaptive", None)
     plan = make_plan(opts)
+    if adaptive is not None:
+        _adaptive_batches(plan, adaptive, opts)
     if decision is not None:
         # inputs.method is the method rendered (render, Makefile and report read it);
         # requested_method records that it was chosen automatically.
@@ -337,9 +356,32 @@ def convert(opts: ConvertOptions) -> dict:
     return plan
 
 
+def _adaptive_batches(plan: dict, adaptive: dict, opts: ConvertOptions) -> None:
+    """Per-sample row ranges (``sample_rows``, film rows [start, end)) and batches of
+    consecutive samples with the same rows (one POV-Ray row range per process)."""
+    from .auto_plan import sample_row_ranges
+    h, w = plan["film"]["height_px"], plan["film"]["width_px"]
+    rows = sample_row_ranges(adaptive, h)
+    n = len(rows)
+    bs = opts.batch_size or math.ceil(n / (os.cpu_count() or 1))
+    batches, cur = [], []
+    for k in range(n):
+        if cur and (rows[k] != rows[cur[0]] or len(cur) >= bs):
+            batches.append(cur)
+            cur = []
+        cur.append(k)
+    batches.append(cur)
+    plan["batches"] = batches
+    plan["sample_rows"] = rows
+    pixel_samples = sum((r1 - r0) * w for r0, r1 in rows)
+    plan["adaptive"] = dict(adaptive, pixel_samples=pixel_samples,
+                            uniform_pixel_samples=n * h * w)
+
+
 def _invalidate_outputs(out: Path) -> None:
     """Inputs changed: earlier samples and images no longer belong to this plan."""
-    for pattern in ("samples/*.exr", "samples/*.done", "samples/*.inc", "image.exr", "image.png",
+    for pattern in ("samples/*.exr", "samples/*.done", "samples/*.inc", "samples/*.blocked",
+                    "image.exr", "image.png",
                     "pupil.npz", "view-*.exr"):
         for f in out.glob(pattern):
             f.unlink()

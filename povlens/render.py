@@ -51,7 +51,7 @@ from .paraxial import stopped_down
 from .povray import find_povray, render as povray_render
 from .prescription import read_lens
 
-__all__ = ["render_batch", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
+__all__ = ["render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
            "lens_for"]
 
 
@@ -102,8 +102,37 @@ def _sample_paths(outdir: Path, k: int) -> tuple[Path, Path, Path]:
     return s / f"sample_{k:04d}.exr", s / f"sample_{k:04d}.weight.exr", s / f"sample_{k:04d}.inc"
 
 
+def _blocked_path(outdir: Path, k: int) -> Path:
+    return Path(outdir) / "samples" / f"sample_{k:04d}.blocked"
+
+
+def _sample_done(outdir: Path, k: int) -> bool:
+    """Sample k's weights exist, and its image or the marker that it has none (all
+    its rays blocked: it is black with weight 0, never rendered)."""
+    exr, weight, _ = _sample_paths(outdir, k)
+    return weight.exists() and (exr.exists() or _blocked_path(outdir, k).exists())
+
+
+def sample_rows(plan: dict, k: int) -> tuple[int, int]:
+    """Film rows [start, end) sample k renders (all rows unless the plan is adaptive)."""
+    rows = plan.get("sample_rows")
+    if rows is None:
+        return 0, plan["film"]["height_px"]
+    return int(rows[k][0]), int(rows[k][1])
+
+
+def samples_per_pixel(plan: dict) -> np.ndarray:
+    """(H,) number of samples whose rows include each film row (N_p of a pixel)."""
+    h = plan["film"]["height_px"]
+    n = np.zeros(h, dtype=np.int64)
+    for k in range(plan["inputs"]["samples"]):
+        r0, r1 = sample_rows(plan, k)
+        n[r0:r1] += 1
+    return n
+
+
 def _write_mesh(plan: dict, lens, table, outdir: Path, k: int,
-                points: np.ndarray | None = None) -> None:
+                points: np.ndarray | None = None) -> bool:
     """Write sample k's ray mesh and weights.
 
     ``table`` is the lens sampler (the plan's exit-pupil table; any object with
@@ -125,17 +154,49 @@ def _write_mesh(plan: dict, lens, table, outdir: Path, k: int,
         points[..., :2] = 0.5  # pixel centres, as POV-Ray's perspective camera
     rays = sample_rays(lens, plan["focus"]["film_distance_mm"], film, table, placement, points)
     exr, weight_path, inc = _sample_paths(outdir, k)
+    r0, r1 = sample_rows(plan, k)
+    valid, weight = rays.valid, rays.weight
+    if (r0, r1) != (0, film.height_px):
+        # rows this sample does not render: no rays (the sink), weight 0
+        outside = np.ones(valid.shape[0], dtype=bool)
+        outside[r0:r1] = False
+        valid = valid.copy()
+        valid[outside] = False
+        weight = np.where(outside[:, None], 0.0, weight)
+    if not np.any(weight[r0:r1] > 0):
+        # every ray of its rows blocked: black, weight 0, nothing to render
+        write_exr(weight_path, np.zeros(weight.shape + (1,), dtype=np.float32))
+        write_text(_blocked_path(outdir, k), f"{r0} {r1}\n")
+        return False
     part = inc.with_name(inc.name + ".part")
-    t = write_ray_mesh(part, "PovlensRays", rays.origin, rays.direction, rays.valid,
+    t = write_ray_mesh(part, "PovlensRays", rays.origin, rays.direction, valid,
                        sink_centre=plan["sink_centre"])
     with open(part, "a") as f:
         f.write(f"#declare PovlensTranslate = <{t[0]:.17g}, {t[1]:.17g}, {t[2]:.17g}>;\n")
     os.replace(part, inc)
-    write_exr(weight_path, rays.weight[..., None].astype(np.float32))
+    write_exr(weight_path, weight[..., None].astype(np.float32))
+    return True
 
 
-def _render_frames(plan: dict, outdir: Path, batch: int, frames: list[int]) -> None:
-    """Render the animation frames ``frames`` of batch ``batch`` into sample EXRs."""
+def _row_args(plan: dict, rows: tuple[int, int] | None) -> list[str]:
+    """+SR/+ER for film rows [r0, r1): output row = film row + drop_top_rows, POV-Ray
+    rows count from 1 and values <= 1 are fractions (see povray._span_args)."""
+    pv = plan["povray"]
+    drop, rh = pv["drop_top_rows"], pv["render_height"]
+    r0, r1 = rows if rows is not None else (0, plan["film"]["height_px"])
+    s, e = r0 + drop, r1 + drop            # 0-based half-open output rows
+    args = []
+    if s > 0:
+        args.append(f"+SR{s + 1}")
+    if e < rh:
+        args.append(f"+ER{e}" if e >= 2 else f"+ER{1.5 / rh:.9f}")
+    return args
+
+
+def _render_frames(plan: dict, outdir: Path, batch: int, frames: list[int],
+                   rows: tuple[int, int] | None = None) -> None:
+    """Render the animation frames ``frames`` of batch ``batch`` into sample EXRs
+    (only film rows ``rows`` = [start, end), default all)."""
     pv = plan["povray"]
     samples = Path(outdir) / "samples"
     pov = samples / f"batch_{batch:03d}.pov"
@@ -152,8 +213,7 @@ def _render_frames(plan: dict, outdir: Path, batch: int, frames: list[int]) -> N
             cmd.append(f"Declare=PovlensFrame={frames[0]}")
         else:
             cmd += [f"+KFI{frames[0]}", f"+KFF{frames[-1]}"]
-        if pv["drop_top_rows"]:
-            cmd.append(f"+SR{pv['drop_top_rows'] + 1}")
+        cmd += _row_args(plan, rows)
         proc = subprocess.run(cmd, cwd=samples, stdin=subprocess.DEVNULL, capture_output=True,
                               text=True, errors="replace")
         if proc.returncode != 0:
@@ -186,31 +246,29 @@ def render_batch(outdir: str | os.PathLike, batch: int) -> list[int]:
     if not 0 <= batch < len(batches):
         raise PovlensError(f"batch {batch}: {outdir} has batches 0..{len(batches) - 1}")
     done = outdir / "samples" / f"batch_{batch:03d}.done"
-    todo = [k for k in batches[batch]
-            if not all(p.exists() for p in _sample_paths(outdir, k)[:2])]
+    todo = [k for k in batches[batch] if not _sample_done(outdir, k)]
     if todo:
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)
         _exposure(outdir, plan, lens, table)
         t0 = time.perf_counter()
         try:
-            for k in todo:
-                _write_mesh(plan, lens, table, outdir, k)
+            render = [k for k in todo if _write_mesh(plan, lens, table, outdir, k)]
             t1 = time.perf_counter()
-            # Frames must be consecutive: render runs of consecutive samples.
-            runs, run = [], [todo[0]]
-            for k in todo[1:]:
-                if k == run[-1] + 1:
-                    run.append(k)
+            # Frames must be consecutive, with one row range: render runs of them.
+            runs = []
+            for k in render:
+                if runs and k == runs[-1][-1] + 1 and sample_rows(plan, k) == sample_rows(
+                        plan, runs[-1][0]):
+                    runs[-1].append(k)
                 else:
-                    runs.append(run)
-                    run = [k]
-            runs.append(run)
+                    runs.append([k])
             for r in runs:
-                _render_frames(plan, outdir, batch, r)
+                _render_frames(plan, outdir, batch, r, sample_rows(plan, r[0]))
             t2 = time.perf_counter()
             write_text(outdir / "samples" / f"batch_{batch:03d}.timing.json", json.dumps(
-                {"samples": len(todo), "rays_and_meshes_s": t1 - t0, "povray_s": t2 - t1}) + "\n")
+                {"samples": len(todo), "blocked": len(todo) - len(render),
+                 "rays_and_meshes_s": t1 - t0, "povray_s": t2 - t1}) + "\n")
         finally:
             for k in todo:
                 _sample_paths(outdir, k)[2].unlink(missing_ok=True)
@@ -258,20 +316,29 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
         vignetting = plan["inputs"].get("vignetting", True)
     n = plan["inputs"]["samples"]
     drop = plan["povray"]["drop_top_rows"]
-    missing = [k for k in range(n) if not all(p.exists() for p in _sample_paths(outdir, k)[:2])]
+    missing = [k for k in range(n) if not _sample_done(outdir, k)]
     if missing:
         raise PovlensError(f"{outdir}: samples {missing[:8]}{'...' if len(missing) > 8 else ''} "
                            f"are not rendered yet", "run 'povlens render' or 'make' in the folder")
     lens = lens_for(plan)
     table = pupil_table_for(outdir, plan, lens)
     exposure = _exposure(outdir, plan, lens, table)
-    paths = [_sample_paths(outdir, k)[0] for k in range(n)]
-    weights = [read_image(_sample_paths(outdir, k)[1])[..., 0].astype(np.float64)
-               for k in range(n)]
-    # sum w I / sum w, in float64 (composite.py); times sum w / N for the camera measurement
-    image = composite(paths, weights, drop_top_rows=drop)[..., :3].astype(np.float64)
-    if vignetting:
-        image *= (np.sum(weights, axis=0) * (exposure / n))[..., None]
+    # Blocked samples (all rays blocked) are black with weight 0: they add nothing to
+    # the sums but count in N_p.  Adaptive plans: sample k covers only its rows
+    # (weight 0 elsewhere) and pixel p's N_p counts the samples covering its row.
+    rendered = [k for k in range(n) if not _blocked_path(outdir, k).exists()]
+    film = film_for(plan)
+    n_p = samples_per_pixel(plan).astype(np.float64)
+    if not rendered:
+        image = np.zeros((film.height_px, film.width_px, 3))
+    else:
+        paths = [_sample_paths(outdir, k)[0] for k in rendered]
+        weights = [read_image(_sample_paths(outdir, k)[1])[..., 0].astype(np.float64)
+                   for k in rendered]
+        # sum w I / sum w, in float64 (composite.py); times sum w / N_p for the measurement
+        image = composite(paths, weights, drop_top_rows=drop)[..., :3].astype(np.float64)
+        if vignetting:
+            image *= (np.sum(weights, axis=0) * exposure / n_p[:, None])[..., None]
     if write:
         _finish_image(outdir, image.astype(np.float32))
     return image
@@ -337,7 +404,7 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
         return outdir / "image.exr"
     jobs = jobs or os.cpu_count() or 1
     todo = [b for b, ks in enumerate(plan["batches"])
-            if not all(p.exists() for k in ks for p in _sample_paths(outdir, k)[:2])]
+            if not all(_sample_done(outdir, k) for k in ks)]
     if todo:
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)  # build once, before the workers start

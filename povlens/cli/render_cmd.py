@@ -64,6 +64,10 @@ def _add_convert_arguments(p) -> None:
     p.add_argument("--no-jitter", action="store_true",
                    help="trace every pixel from its centre (no sub-pixel box filter), as "
                         "POV-Ray's perspective camera without anti-aliasing does")
+    p.add_argument("--adaptive", action="store_true",
+                   help="mesh renders: from a depth probe, give sharp row bands fewer lens "
+                        "samples than bands deep in blur (later samples render only the "
+                        "blurred rows, POV-Ray +SR/+ER)")
     p.add_argument("-o", "--outdir", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
 
@@ -85,7 +89,7 @@ def options_from_args(args) -> ConvertOptions:
         location=args.location, look_at=args.look_at, sky=args.sky,
         real_focus=not args.thick_lens_focus, vignetting=not args.no_vignetting,
         jitter=not args.no_jitter, tolerance_px=args.tolerance,
-        auto_samples=args.samples is None)
+        auto_samples=args.samples is None, adaptive=args.adaptive)
 
 
 def _summary(plan: dict) -> str:
