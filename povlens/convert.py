@@ -42,7 +42,7 @@ from .mesh_camera import (SINK_RADIUS, _pov_string, _template, _vec, default_sin
                           focal_blur_wrapper, pinhole_wrapper, render_size, write_text)
 from .prescription import read_lens
 from .scene_camera import parse_scene_camera
-from .pupil import build_pupil_table
+from .pupil import build_pupil_table, load_if_current
 from .thin_lens import fit_thin_lens, measure_model_error
 
 __all__ = ["ConvertOptions", "make_plan", "convert", "read_plan", "METHODS"]
@@ -132,7 +132,8 @@ def _focus(lens, p, focus_from_pupil_mm: float, real: bool):
 
 
 def make_plan(opts: ConvertOptions) -> dict:
-    """Derive every number of a conversion; pure apart from reading the inputs.
+    """Derive every number of a conversion.  Reads the inputs; its only output file is
+    OUTDIR/pupil.npz (the exit-pupil table, which the render reuses while current).
 
     ``method="auto"`` needs renders (a depth probe): use :func:`convert`."""
     if opts.method == "auto":
@@ -175,8 +176,14 @@ def _make_plan(opts: ConvertOptions):
     else:
         s = object_d - model.centre_z_mm
         depths = [model.centre_z_mm + k * s for k in (0.5, 1.0, 2.0, 10.0)]
-    # Vignetting from the exact exit-pupil table (built again, and saved, at render time).
-    table = build_pupil_table(lens, film_d, film.half_diagonal_mm)
+    # Vignetting from the exact exit-pupil table; saved in OUTDIR for the render to reuse.
+    table_path = Path(opts.outdir) / "pupil.npz"
+    table = (load_if_current(table_path, lens, film_d, film.half_diagonal_mm)
+             if table_path.exists() else None)
+    if table is None:
+        table = build_pupil_table(lens, film_d, film.half_diagonal_mm)
+        if table_path.parent.is_dir():
+            table.save(table_path)
     model_error = measure_model_error(lens, film_d, model, film, depths, pupil_table=table)
 
     version = povray_version()
@@ -380,9 +387,9 @@ def _adaptive_batches(plan: dict, adaptive: dict, opts: ConvertOptions) -> None:
 
 def _invalidate_outputs(out: Path) -> None:
     """Inputs changed: earlier samples and images no longer belong to this plan."""
+    # pupil.npz stays: load_if_current checks its inputs; exposure.txt does not, so it goes.
     for pattern in ("samples/*.exr", "samples/*.done", "samples/*.inc", "samples/*.blocked",
-                    "image.exr", "image.png",
-                    "pupil.npz", "view-*.exr"):
+                    "image.exr", "image.png", "exposure.txt", "view-*.exr"):
         for f in out.glob(pattern):
             f.unlink()
 

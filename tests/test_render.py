@@ -145,3 +145,18 @@ def test_cli_render_and_errors(tmp_path):
     r = povlens("render", str(SCENES / "chart.pov"), "--lens", "dgauss.50mm", "--focus", "3",
                 "-o", str(tmp_path / "p"), env={"POVLENS_POVRAY": "/nonexistent/povray"})
     assert r.returncode == 3 and "POVLENS_POVRAY" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_changed_inputs_drop_stale_samples_and_exposure(tmp_path):
+    convert(opts(tmp_path, samples=2, batch_size=2))
+    out = tmp_path / "out"
+    render_outdir(out, jobs=1, quiet=True)
+    assert (out / "exposure.txt").exists() and (out / "pupil.npz").exists()
+    e_f2 = float((out / "exposure.txt").read_text())
+    convert(opts(tmp_path, samples=2, batch_size=2, f_number=4.0))   # the stop changed
+    assert not (out / "exposure.txt").exists()
+    assert not list((out / "samples").glob("sample_*.exr"))
+    render_outdir(out, jobs=1, quiet=True)
+    # exposure = 1 / (E/L) at the centre, and E/L goes as 1/N^2: f/2.03 -> f/4 is ~3.9x
+    assert float((out / "exposure.txt").read_text()) == pytest.approx(e_f2 * (4.0 / 2.03) ** 2,
+                                                                      rel=0.15)
