@@ -147,7 +147,7 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     reasons.append(f"depth range {numbers['near_distance_mm'] / 1000:.3g} m to "
                    + ("infinity" if math.isinf(far_z_mm)
                       else f"{numbers['far_distance_mm'] / 1000:.3g} m")
-                   + f" from the entrance pupil; focus "
+                   + " from the entrance pupil; focus "
                    + ("inside" if blur["focus_inside_range"] else "outside") + " the range")
     pin = [check("pinhole: max thin-lens blur", blur["max_px"], tol),
            check("pinhole: max real spot", max_real, tol),

@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from .errors import OpticsError, UsageError
-from .prescription import AIR, LensPrescription
+from .prescription import LensPrescription
 
 __all__ = ["ParaxialData", "paraxial_data", "system_matrix", "axial_ray_heights",
            "stop_index", "stopped_down", "lensmaker_focal_length_mm", "image_of_object"]

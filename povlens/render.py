@@ -26,12 +26,9 @@ bright as the pinhole render, and vignetting shows as it would on film.
 
 from __future__ import annotations
 
-import contextlib
 import json
-import math
 import os
 import re
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -40,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .convert import ConvertOptions, convert, read_plan
+from .convert import read_plan
 from .errors import PovlensError, PovrayError
 from .film import Film
 from .composite import composite

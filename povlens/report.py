@@ -30,7 +30,6 @@ import html
 import io
 import json
 import math
-import os
 import time
 from pathlib import Path
 

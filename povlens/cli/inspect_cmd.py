@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 
 from ..paraxial import paraxial_data
 from .common import add_lens_arguments, load_lens, print_json
