@@ -6,8 +6,9 @@
 One run measures, on the same scene and size:
 * the pinhole render (one POV-Ray pass: the trace cost of one sample plus start-up);
 * focal_blur with ``blur_samples N, N`` (the equivalent thin lens);
-* the mesh path at several batch sizes (lens samples per POV-Ray process), with
-  its parts: exit-pupil table, rays and mesh files (Python), POV-Ray, composite;
+* the mesh path with 1, 2, 4 and 8 POV-Ray processes in flight per batch worker
+  (one worker per core; every lens sample is its own POV-Ray process), with its
+  parts: exit-pupil table, rays and mesh files (Python), POV-Ray, composite;
 and prints the ratios.  Results go to stdout; redirect to benchmarks/results/.
 """
 
@@ -42,7 +43,7 @@ def main(argv=None):
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--width", type=int, default=160)
     ap.add_argument("--height", type=int, default=120)
-    ap.add_argument("--batch-sizes", default="1,4,8")
+    ap.add_argument("--in-flight", default="1,2,4,8")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     args = ap.parse_args(argv)
     base = dict(scene=args.scene, lens=args.lens, focus=args.focus, width=args.width,
@@ -58,26 +59,27 @@ def main(argv=None):
               f"N = {args.samples} samples, {args.jobs} jobs")
         print(f"pinhole (1 pass)                     {t_pin:8.2f} s")
         print(f"focal_blur blur_samples N,N          {t_fb:8.2f} s")
-        for bs in [int(b) for b in args.batch_sizes.split(",")]:
+        for bs in [int(b) for b in args.in_flight.split(",")]:
             d = tmp / f"mesh{bs}"
-            t_conv, _ = timed(convert, ConvertOptions(outdir=str(d), method="mesh",
-                                                      batch_size=bs, **base))
+            t_conv, _ = timed(convert, ConvertOptions(outdir=str(d), method="mesh", **base))
             plan = read_plan(d)
             t_table, _ = timed(pupil_table_for, d, plan, lens_for(plan))
-            t_render, _ = timed(render_outdir, d, jobs=args.jobs, quiet=True)
+            t_render, _ = timed(render_outdir, d, jobs=args.jobs, quiet=True, in_flight=bs)
             t_comp, _ = timed(composite_outdir, d)
             parts = [json.loads(p.read_text()) for p in (d / "samples").glob("*.timing.json")]
             rays = sum(p["rays_and_meshes_s"] for p in parts)
             pov = sum(p["povray_s"] for p in parts)
             total = t_conv + t_table + t_render
             rows.append((bs, total))
-            print(f"mesh, {bs:2d} samples/process: total {total:7.2f} s = convert {t_conv:.2f} "
+            print(f"mesh, {bs:2d} POV-Ray in flight: total {total:7.2f} s = convert {t_conv:.2f} "
                   f"+ pupil table {t_table:.2f} + render {t_render:.2f} (of which, summed over "
-                  f"jobs: rays+meshes {rays:.2f}, POV-Ray {pov:.2f}; composite {t_comp:.2f}); "
+                  f"batches: rays+meshes {rays:.2f}, POV-Ray processes {pov:.2f}; composite "
+                  f"{t_comp:.2f}); "
                   f"{total / t_fb:.1f}x focal_blur, {total / (args.samples * t_pin):.2f}x "
                   f"N pinhole passes")
         best = min(rows, key=lambda r: r[1])
-        print(f"best mesh setting: {best[0]} samples/process, {best[1]:.2f} s = "
+        print(f"best mesh setting: {best[0]} POV-Ray processes in flight per worker, "
+              f"{best[1]:.2f} s = "
               f"{best[1] / t_fb:.1f}x focal_blur with the same N")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

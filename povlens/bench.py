@@ -17,10 +17,9 @@ and channels):
 (d) ``focal-blur``     -- POV-Ray's ``focal_blur`` with the equivalent thin lens
     and ``blur_samples N, N`` (``povlens render-view --view focal-blur``).
 
-(a)-(c) use the same mesh code as ``povlens render`` (:func:`povlens.render._write_mesh`
-with a sampler and a point override, then :func:`povlens.render._render_frames`
-and :func:`povlens.render.composite_outdir`), one batch of samples per job, the
-jobs in parallel.  Timings cover rays, meshes, POV-Ray and compositing; the
+(a)-(c) use the same mesh code as ``povlens render`` (:func:`povlens.render.render_samples`
+with a sampler and a point override, then :func:`povlens.render.composite_outdir`),
+one batch of samples per job, the jobs in parallel.  Timings cover rays, meshes, POV-Ray and compositing; the
 one-off per-lens precomputation (table, pbrt boxes) is reported separately, and
 conversion (``plan.json``) is excluded for every method.  (d) is timed over its
 POV-Ray run (all cores).  Mesh composites keep the lens's vignetting (the plan
@@ -70,8 +69,8 @@ import numpy as np
 
 from .convert import ConvertOptions, convert, read_plan
 from .images import read_image
-from .render import (_exposure, _render_frames, _sample_paths, _write_mesh, composite_outdir,
-                     film_for, lens_for, pupil_table_for, render_view)
+from .render import (_exposure, composite_outdir, film_for, lens_for, pupil_table_for,
+                     render_samples, render_view)
 
 __all__ = ["BenchSettings", "Row", "METHODS", "full_settings", "quick_settings", "run_bench",
            "render_mesh", "random_points", "time_to_error", "ROOT"]
@@ -152,9 +151,9 @@ def render_mesh(outdir, sampler=None, points=None, jobs: int | None = None) -> n
 
     sampler : lens sampler for the rays (default: the plan's exit-pupil table).
     points : ``points(k) -> (H, W, 4)`` overriding the plan's Sobol points.
-    Batches run ``jobs`` at a time (threads driving POV-Ray processes); each
-    batch's meshes are written just before it renders and deleted after it, as
-    in :func:`povlens.render.render_batch`.  Samples already rendered are redone.
+    Batches run ``jobs`` at a time (threads, each driving several POV-Ray
+    processes, as :func:`povlens.render.render_samples` does for
+    :func:`povlens.render.render_batch`).  Samples already rendered are redone.
     """
     outdir = Path(outdir)
     plan = read_plan(outdir)
@@ -164,15 +163,7 @@ def render_mesh(outdir, sampler=None, points=None, jobs: int | None = None) -> n
     sampler = table if sampler is None else sampler
 
     def run(b: int) -> None:
-        ks = plan["batches"][b]
-        try:
-            for k in ks:
-                _write_mesh(plan, lens, sampler, outdir, k,
-                            points=None if points is None else points(k))
-            _render_frames(plan, outdir, b, ks)
-        finally:
-            for k in ks:
-                _sample_paths(outdir, k)[2].unlink(missing_ok=True)
+        render_samples(plan, lens, sampler, outdir, b, plan["batches"][b], points=points)
 
     n_batches = len(plan["batches"])
     jobs = max(1, min(jobs or os.cpu_count() or 1, n_batches))

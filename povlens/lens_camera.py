@@ -110,27 +110,38 @@ class SampleRays:
 
 
 def sample_rays(lens: LensPrescription, film_distance_mm: float, film: Film, sampler,
-                placement: ScenePlacement, points: np.ndarray) -> SampleRays:
+                placement: ScenePlacement, points: np.ndarray,
+                rows: tuple[int, int] | None = None) -> SampleRays:
     """Trace one sample per pixel through the real lens and place it in the world.
 
     sampler : an object with ``sample(film_xy (n, 2), u (n, 2))`` returning
         ``film_point``, ``direction``, ``weight`` and ``valid`` arrays (see
         :mod:`povlens.pupil`).
     points : (H, W, 4) from :func:`sample_points`.
+    rows : film rows [start, end) to sample (default all); the other rows get no
+        ray (``valid`` False, weight 0) and cost nothing.
     """
     h, w = film.height_px, film.width_px
-    film_xy = film.film_points_mm(points[..., :2]).reshape(-1, 2)
-    s = sampler.sample(film_xy, points[..., 2:].reshape(-1, 2))
-    valid = np.asarray(s.valid, bool).copy()
-    idx = np.nonzero(valid)[0]
+    r0, r1 = (0, h) if rows is None else (int(rows[0]), int(rows[1]))
+    if not 0 <= r0 <= r1 <= h:
+        raise ValueError(f"rows [{r0}, {r1}) outside the film's {h} rows")
     origin = np.zeros((h * w, 3))
     direction = np.tile([0.0, 0.0, 1.0], (h * w, 1))
-    if idx.size:
-        t = trace_from_film(lens, film_distance_mm, s.film_point[idx], s.direction[idx])
-        origin[idx] = t.origin_mm
-        direction[idx] = t.direction
-        valid[idx] = t.passed
-    weight = np.where(valid, s.weight, 0.0)
+    valid = np.zeros(h * w, dtype=bool)
+    weight = np.zeros(h * w)
+    if r1 > r0:
+        span = slice(r0 * w, r1 * w)
+        film_xy = film.film_points_mm(points[..., :2])[r0:r1].reshape(-1, 2)
+        s = sampler.sample(film_xy, points[r0:r1, :, 2:].reshape(-1, 2))
+        ok = np.asarray(s.valid, bool).copy()
+        idx = np.nonzero(ok)[0]
+        if idx.size:
+            t = trace_from_film(lens, film_distance_mm, s.film_point[idx], s.direction[idx])
+            origin[r0 * w + idx] = t.origin_mm
+            direction[r0 * w + idx] = t.direction
+            ok[idx] = t.passed
+        valid[span] = ok
+        weight[span] = np.where(ok, s.weight, 0.0)
     return SampleRays(placement.points_to_world(origin).reshape(h, w, 3),
                       placement.directions_to_world(direction).reshape(h, w, 3),
                       valid.reshape(h, w), weight.reshape(h, w))

@@ -5,9 +5,10 @@ so an interrupted run never leaves a half-written file at a final name):
 
 * batch b of the mesh method -> ``samples/sample_KKKK.exr`` (POV-Ray, linear),
   ``samples/sample_KKKK.weight.exr`` (per-pixel radiometric weights, float32),
-  then the marker ``samples/batch_BBB.done``.  The ray meshes
-  (``sample_KKKK.inc``) are built just before the batch renders and deleted
-  after it, so disk use stays at one batch of meshes per running job.
+  then the marker ``samples/batch_BBB.done``.  A batch's worker traces and
+  writes one sample's ray mesh (``sample_KKKK.inc``) at a time and starts a
+  POV-Ray process for it while it goes on to the next (several in flight, see
+  :data:`POVRAY_IN_FLIGHT`); each mesh is deleted when its render ends.
 * a view (``pinhole`` / ``focal-blur``) -> ``view-<name>.exr``.
 * composite -> ``image.exr`` (linear float) and ``image.png`` (sRGB preview).
 
@@ -28,7 +29,7 @@ from __future__ import annotations
 
 import json
 import os
-import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -149,17 +150,11 @@ def _write_mesh(plan: dict, lens, table, outdir: Path, k: int,
         points = np.array(points, dtype=np.float64)
     if not inp.get("jitter", True):
         points[..., :2] = 0.5  # pixel centres, as POV-Ray's perspective camera
-    rays = sample_rays(lens, plan["focus"]["film_distance_mm"], film, table, placement, points)
-    exr, weight_path, inc = _sample_paths(outdir, k)
     r0, r1 = sample_rows(plan, k)
+    rays = sample_rays(lens, plan["focus"]["film_distance_mm"], film, table, placement, points,
+                       rows=(r0, r1))  # rows this sample does not render: no rays, weight 0
+    exr, weight_path, inc = _sample_paths(outdir, k)
     valid, weight = rays.valid, rays.weight
-    if (r0, r1) != (0, film.height_px):
-        # rows this sample does not render: no rays (the sink), weight 0
-        outside = np.ones(valid.shape[0], dtype=bool)
-        outside[r0:r1] = False
-        valid = valid.copy()
-        valid[outside] = False
-        weight = np.where(outside[:, None], 0.0, weight)
     if not np.any(weight[r0:r1] > 0):
         # every ray of its rows blocked: black, weight 0, nothing to render
         write_exr(weight_path, np.zeros(weight.shape + (1,), dtype=np.float32))
@@ -190,49 +185,130 @@ def _row_args(plan: dict, rows: tuple[int, int] | None) -> list[str]:
     return args
 
 
-def _render_frames(plan: dict, outdir: Path, batch: int, frames: list[int],
-                   rows: tuple[int, int] | None = None) -> None:
-    """Render the animation frames ``frames`` of batch ``batch`` into sample EXRs
-    (only film rows ``rows`` = [start, end), default all)."""
-    pv = plan["povray"]
-    samples = Path(outdir) / "samples"
-    pov = samples / f"batch_{batch:03d}.pov"
-    scene_dir = str(Path(plan["inputs"]["scene"]).parent)
-    with tempfile.TemporaryDirectory(prefix=f".batch_{batch:03d}.", dir=samples) as tmp:
-        log = Path(tmp) / "fatal.log"  # POV-Ray wants it beside the images
-        rel = os.path.relpath(tmp, samples)
-        cmd = [find_povray(), "-D", "-V", "-GR", "-GS", f"+I{pov.name}",
-               f"+O{rel}/f.exr", "+FE",
-               f"+W{pv['render_width']}", f"+H{pv['render_height']}", "-A", "+WT1",
-               f"+L{scene_dir}"]
-        if len(frames) == 1:
-            cmd[cmd.index(f"+O{rel}/f.exr")] = f"+O{rel}/f{frames[0]}.exr"
-            cmd.append(f"Declare=PovlensFrame={frames[0]}")
-        else:
-            cmd += [f"+KFI{frames[0]}", f"+KFF{frames[-1]}"]
-        cmd += _row_args(plan, rows)
-        proc = subprocess.run(cmd, cwd=samples, stdin=subprocess.DEVNULL, capture_output=True,
-                              text=True, errors="replace")
+#: POV-Ray processes one render worker keeps running at once.  Each POV-Ray run
+#: spends ~0.6 s of wall time idle (start-up and frame hand-over; user CPU ~0.01 s,
+#: povray-mesh-camera.md §10.3): measured here, 8 tiny renders take 5.5 s one
+#: after another and 0.72 s as 8 parallel processes.  So every lens sample is its
+#: own POV-Ray process, several in flight per worker, and the idle time of one
+#: overlaps the parse and trace of the others.
+POVRAY_IN_FLIGHT = 4
+
+
+class _SampleRenders:
+    """POV-Ray processes rendering single lens samples of a batch, at most
+    ``limit`` at once.  :meth:`start` returns once a slot is free; :meth:`finish`
+    waits for all.  Each sample renders into its own temporary folder (stderr to a
+    file there, so a chatty scene cannot fill a pipe) and is renamed to
+    ``sample_KKKK.exr`` when POV-Ray succeeds; its mesh is deleted then."""
+
+    def __init__(self, plan: dict, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT):
+        self.plan, self.outdir, self.batch = plan, Path(outdir), batch
+        self.samples = self.outdir / "samples"
+        self.limit = max(1, int(limit))
+        self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
+        self.povray_s = 0.0
+
+    def start(self, k: int) -> None:
+        while len(self.running) >= self.limit:
+            self._reap(block=True)
+        pv = self.plan["povray"]
+        pov = self.samples / f"batch_{self.batch:03d}.pov"
+        tmp = Path(tempfile.mkdtemp(prefix=f".sample_{k:04d}.", dir=self.samples))
+        rel = os.path.relpath(tmp, self.samples)
+        cmd = [find_povray(), "-D", "-V", "-GR", "-GS", f"+I{pov.name}", f"+O{rel}/f.exr",
+               "+FE", f"+W{pv['render_width']}", f"+H{pv['render_height']}", "-A", "+WT1",
+               f"+L{Path(self.plan['inputs']['scene']).parent}",
+               f"Declare=PovlensFrame={k}"] + _row_args(self.plan, sample_rows(self.plan, k))
+        with open(tmp / "stderr.txt", "w") as err:
+            proc = subprocess.Popen(cmd, cwd=self.samples, stdin=subprocess.DEVNULL,
+                                    stdout=subprocess.DEVNULL, stderr=err)
+        self.running[k] = (proc, tmp, time.perf_counter())
+
+    def _reap(self, block: bool) -> None:
+        while True:
+            done = [k for k, (p, _, _) in self.running.items() if p.poll() is not None]
+            if done or not block:
+                break
+            time.sleep(0.01)
+        for k in done:
+            proc, tmp, t0 = self.running.pop(k)
+            self.povray_s += time.perf_counter() - t0
+            try:
+                self._collect(k, proc, tmp)
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+                _sample_paths(self.outdir, k)[2].unlink(missing_ok=True)
+
+    def _collect(self, k: int, proc: subprocess.Popen, tmp: Path) -> None:
+        pov = self.samples / f"batch_{self.batch:03d}.pov"
         if proc.returncode != 0:
             from .povray import _error_text
-            log_text = log.read_text(errors="replace") if log.exists() else ""
-            raise PovrayError(f"POV-Ray failed on {pov} (exit status {proc.returncode}):\n"
-                              + _error_text(proc.stderr, log_text),
+            stderr = (tmp / "stderr.txt").read_text(errors="replace")
+            raise PovrayError(f"POV-Ray failed on {pov}, lens sample {k} (exit status "
+                              f"{proc.returncode}):\n" + _error_text(stderr, ""),
                               "fix the scene, or run 'make' in the folder to see the command")
-        found = {}
-        for f in Path(tmp).iterdir():
-            m = re.fullmatch(r"f(\d+)\.exr", f.name)
-            if m:
-                found[int(m.group(1))] = f
-        missing = [k for k in frames if k not in found]
-        if missing:
-            raise PovrayError(f"POV-Ray rendered batch {batch} but wrote no image for samples "
-                              f"{missing}", "check free disk space and POV-Ray's permitted paths")
-        for k in frames:
-            os.replace(found[k], _sample_paths(outdir, k)[0])
+        out = tmp / "f.exr"
+        if not out.exists():
+            raise PovrayError(f"POV-Ray rendered lens sample {k} of {pov} but wrote no image",
+                              "check free disk space and POV-Ray's permitted paths")
+        os.replace(out, _sample_paths(self.outdir, k)[0])
+
+    def finish(self) -> None:
+        while self.running:
+            self._reap(block=True)
+
+    def abort(self) -> None:
+        """Stop every running process (an error or an interrupt)."""
+        for k, (p, tmp, _) in list(self.running.items()):
+            p.terminate()
+            p.wait()
+            shutil.rmtree(tmp, ignore_errors=True)
+            _sample_paths(self.outdir, k)[2].unlink(missing_ok=True)
+        self.running.clear()
 
 
-def render_batch(outdir: str | os.PathLike, batch: int) -> list[int]:
+def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: int,
+                   samples: list[int], points=None, in_flight: int = POVRAY_IN_FLIGHT) -> dict:
+    """Trace, write and render lens samples ``samples`` of batch ``batch``, pipelined.
+
+    For each sample in turn: trace its rays and write its mesh and weights
+    (:func:`_write_mesh`), then start its POV-Ray process and go on to the next
+    sample while it runs (at most ``in_flight`` at once).  Samples whose rays are
+    all blocked are not rendered.  ``sampler`` is the lens sampler (normally the
+    plan's exit-pupil table); ``points(k)`` overrides the plan's sample points
+    (:mod:`povlens.bench`).  Returns timings: {samples, blocked,
+    rays_and_meshes_s (Python), povray_s (summed over the overlapping processes),
+    wall_s}.
+    """
+    outdir = Path(outdir)
+    t0 = time.perf_counter()
+    t_mesh = 0.0
+    blocked = 0
+    queue = _SampleRenders(plan, outdir, batch, in_flight)
+    try:
+        for k in samples:
+            t = time.perf_counter()
+            ok = _write_mesh(plan, lens, sampler, outdir, k,
+                             points=None if points is None else points(k))
+            t_mesh += time.perf_counter() - t
+            if ok:
+                queue.start(k)
+            else:
+                blocked += 1
+            queue._reap(block=False)
+        queue.finish()
+    except BaseException:
+        queue.abort()
+        raise
+    finally:
+        for k in samples:
+            _sample_paths(outdir, k)[2].unlink(missing_ok=True)
+    return {"samples": len(samples), "blocked": blocked, "rays_and_meshes_s": t_mesh,
+            "povray_s": queue.povray_s, "wall_s": time.perf_counter() - t0}
+
+
+def render_batch(outdir: str | os.PathLike, batch: int,
+                 in_flight: int = POVRAY_IN_FLIGHT) -> list[int]:
     """Render batch ``batch`` of a mesh plan; returns the samples it rendered (resumes)."""
     outdir = Path(outdir)
     plan = read_plan(outdir)
@@ -248,27 +324,9 @@ def render_batch(outdir: str | os.PathLike, batch: int) -> list[int]:
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)
         _exposure(outdir, plan, lens, table)
-        t0 = time.perf_counter()
-        try:
-            render = [k for k in todo if _write_mesh(plan, lens, table, outdir, k)]
-            t1 = time.perf_counter()
-            # Frames must be consecutive, with one row range: render runs of them.
-            runs = []
-            for k in render:
-                if runs and k == runs[-1][-1] + 1 and sample_rows(plan, k) == sample_rows(
-                        plan, runs[-1][0]):
-                    runs[-1].append(k)
-                else:
-                    runs.append([k])
-            for r in runs:
-                _render_frames(plan, outdir, batch, r, sample_rows(plan, r[0]))
-            t2 = time.perf_counter()
-            write_text(outdir / "samples" / f"batch_{batch:03d}.timing.json", json.dumps(
-                {"samples": len(todo), "blocked": len(todo) - len(render),
-                 "rays_and_meshes_s": t1 - t0, "povray_s": t2 - t1}) + "\n")
-        finally:
-            for k in todo:
-                _sample_paths(outdir, k)[2].unlink(missing_ok=True)
+        timing = render_samples(plan, lens, table, outdir, batch, todo, in_flight=in_flight)
+        write_text(outdir / "samples" / f"batch_{batch:03d}.timing.json",
+                   json.dumps(timing) + "\n")
     write_text(done, "".join(f"{k}\n" for k in batches[batch]))
     return todo
 
@@ -343,12 +401,14 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
 
 def _progress(total: int, desc: str, quiet: bool):
     from tqdm import tqdm
-    return tqdm(total=total, desc=desc, unit="batch", disable=quiet or not sys.stderr.isatty(),
+    return tqdm(total=total, desc=desc, unit="sample", disable=quiet or not sys.stderr.isatty(),
                 file=sys.stderr)
 
 
-def _run_batches_in_subprocesses(outdir: Path, batches: list[int], jobs: int, bar) -> None:
-    """Run ``povlens render-batch`` for each batch, ``jobs`` at a time.
+def _run_batches_in_subprocesses(outdir: Path, batches: list[int], jobs: int, bar,
+                                 samples: list[int], in_flight: int = POVRAY_IN_FLIGHT) -> None:
+    """Run ``povlens render-batch`` for each batch, ``jobs`` at a time; ``bar``
+    counts the finished ``samples`` (polled from the sample folder).
 
     Separate processes (as make runs them) rather than a fork-based pool: forking a
     process whose image and BLAS libraries have started threads can deadlock.
@@ -361,12 +421,16 @@ def _run_batches_in_subprocesses(outdir: Path, batches: list[int], jobs: int, ba
             while pending and len(procs) < jobs and failure is None:
                 b = pending.pop(0)
                 procs[b] = subprocess.Popen(
-                    [sys.executable, "-m", "povlens", "render-batch", str(outdir), str(b)],
+                    [sys.executable, "-m", "povlens", "render-batch", str(outdir), str(b),
+                     "--in-flight", str(in_flight)],
                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                     text=True, errors="replace")
             if not procs:
                 break
             finished = [b for b, p in procs.items() if p.poll() is not None]
+            n_done = sum(_sample_done(outdir, k) for k in samples)
+            if n_done > bar.n:
+                bar.update(n_done - bar.n)
             if not finished:
                 time.sleep(0.05)
                 continue
@@ -377,8 +441,6 @@ def _run_batches_in_subprocesses(outdir: Path, batches: list[int], jobs: int, ba
                 if p.returncode != 0 and failure is None:
                     failure = (b, p.returncode, err)
                     pending.clear()
-                elif p.returncode == 0:
-                    bar.update(1)
     finally:
         for p in procs.values():  # interrupted: stop the running batches
             p.terminate()
@@ -391,8 +453,12 @@ def _run_batches_in_subprocesses(outdir: Path, batches: list[int], jobs: int, ba
         raise cls(f"batch {b}: {msg}")
 
 
-def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: bool = False) -> Path:
-    """Render everything a converted folder needs, in parallel, and composite."""
+def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: bool = False,
+                  in_flight: int = POVRAY_IN_FLIGHT) -> Path:
+    """Render everything a converted folder needs, in parallel, and composite.
+
+    Mesh plans: ``jobs`` batch workers at once (default one per core), each with up
+    to ``in_flight`` POV-Ray processes (:func:`render_samples`)."""
     outdir = Path(outdir)
     plan = read_plan(outdir)
     method = plan["inputs"]["method"]
@@ -406,12 +472,12 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)  # build once, before the workers start
         _exposure(outdir, plan, lens, table)
-        with _progress(len(todo), "lens samples", quiet) as bar:
+        samples = [k for b in todo for k in plan["batches"][b] if not _sample_done(outdir, k)]
+        with _progress(len(samples), "lens samples", quiet) as bar:
             if jobs == 1:
                 for b in todo:
-                    render_batch(outdir, b)
-                    bar.update(1)
+                    bar.update(len(render_batch(outdir, b, in_flight=in_flight)))
             else:
-                _run_batches_in_subprocesses(outdir, todo, jobs, bar)
+                _run_batches_in_subprocesses(outdir, todo, jobs, bar, samples, in_flight)
     composite_outdir(outdir)
     return outdir / "image.exr"

@@ -423,21 +423,26 @@ class _Folder:
 
     def _times(self) -> str:
         rows = []
-        t_rays = t_pov = 0.0
+        t_rays = t_pov = t_wall = 0.0
         n = 0
         for f in sorted((self.dir / "samples").glob("*.timing.json")):
             try:
                 t = json.loads(f.read_text())
                 t_rays += float(t.get("rays_and_meshes_s", 0.0))
                 t_pov += float(t.get("povray_s", 0.0))
+                t_wall += float(t.get("wall_s", 0.0))
                 n += int(t.get("samples", 0))
             except (ValueError, TypeError, OSError):
                 self.notes.append(f"{f.name}: unreadable timing file, skipped")
         if n:
-            rows.append(["mesh: rays and meshes", _num(t_rays, ".3g", "s"), f"{n} samples"])
-            rows.append(["mesh: POV-Ray", _num(t_pov, ".3g", "s"), f"{n} samples"])
-            rows.append(["mesh: total", _num(t_rays + t_pov, ".3g", "s"),
-                         f"{(t_rays + t_pov) / n:.3g} s per sample"])
+            rows.append(["mesh: rays and meshes (Python)", _num(t_rays, ".3g", "s"),
+                         f"{n} samples, summed over batches"])
+            rows.append(["mesh: POV-Ray processes", _num(t_pov, ".3g", "s"),
+                         "summed over processes, which run several at once"])
+            if t_wall:
+                rows.append(["mesh: batches", _num(t_wall, ".3g", "s"),
+                             f"wall time summed over batches (they run in parallel); "
+                             f"{t_wall / n:.3g} s per sample"])
         for name, t, what in self.timings:
             rows.append([_esc(name), _num(t, ".3g", "s"), _esc(what)])
         if not rows:

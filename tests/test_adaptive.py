@@ -111,8 +111,8 @@ def test_blocked_sample_is_not_rendered_and_counts_as_black(tmp_path, monkeypatc
     convert(opts(tmp_path, "b", adaptive=False, samples=2, batch_size=2))
     real = render.sample_rays
 
-    def blocked_for_sample_1(lens, fd, film, table, placement, points):
-        rays = real(lens, fd, film, table, placement, points)
+    def blocked_for_sample_1(lens, fd, film, table, placement, points, rows=None):
+        rays = real(lens, fd, film, table, placement, points, rows=rows)
         if blocked_for_sample_1.calls == 1:
             rays = type(rays)(rays.origin, rays.direction, np.zeros_like(rays.valid),
                               np.zeros_like(rays.weight))

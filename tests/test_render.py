@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from povlens.convert import ConvertOptions, convert
-from povlens.errors import PovrayError
 from povlens.images import read_image
 from povlens.render import composite_outdir, render_batch, render_outdir, render_view
 
@@ -160,3 +159,60 @@ def test_changed_inputs_drop_stale_samples_and_exposure(tmp_path):
     # exposure = 1 / (E/L) at the centre, and E/L goes as 1/N^2: f/2.03 -> f/4 is ~3.9x
     assert float((out / "exposure.txt").read_text()) == pytest.approx(e_f2 * (4.0 / 2.03) ** 2,
                                                                       rel=0.15)
+
+
+def test_samples_in_flight_render_the_same_image_as_one_at_a_time(tmp_path):
+    one = tmp_path / "one"
+    convert(opts(tmp_path, outdir=str(one), samples=6, batch_size=6))
+    render_batch(one, 0, in_flight=1)
+    many = tmp_path / "many"
+    convert(opts(tmp_path, outdir=str(many), samples=6, batch_size=6))
+    render_batch(many, 0, in_flight=6)
+    for k in range(6):
+        name = f"samples/sample_{k:04d}.exr"
+        np.testing.assert_array_equal(read_image(many / name), read_image(one / name))
+    # the meshes and the per-sample temporary folders are gone
+    assert not list((many / "samples").glob("*.inc"))
+    assert not list((many / "samples").glob(".sample_*"))
+
+
+def _processes_in(folder) -> list[int]:
+    """PIDs of processes whose working directory is ``folder`` (POV-Ray runs there)."""
+    pids = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                if os.readlink(f"/proc/{d}/cwd") == str(folder):
+                    pids.append(int(d))
+            except OSError:
+                pass
+    return pids
+
+
+def test_interrupting_render_stops_povray_and_resumes(tmp_path):
+    out = tmp_path / "int"
+    cmd = [sys.executable, "-m", "povlens", "render", str(SCENES / "paper.pov"), "--lens",
+           "dgauss.50mm", "--focus", "4", "--width", "48", "--height", "36", "--method", "mesh",
+           "--samples", "24", "--batch-size", "12", "-o", str(out), "-q"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    import signal
+    import time
+    t0 = time.monotonic()
+    while not list((out / "samples").glob("sample_*.weight.exr")) if out.exists() else True:
+        assert proc.poll() is None and time.monotonic() - t0 < 120, "render ended too soon"
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    proc.wait(timeout=60)
+    assert proc.returncode != 0
+    time.sleep(0.5)
+    assert _processes_in(out / "samples") == [], "POV-Ray still running after the interrupt"
+    assert subprocess.run(["pgrep", "-f", str(out)], capture_output=True).returncode == 1
+    # no half-written files at final names; resuming finishes the render
+    assert not (out / "image.exr").exists()
+    done = [k for k in range(24) if (out / "samples" / f"sample_{k:04d}.exr").exists()]
+    assert len(done) < 24
+    render_outdir(out, quiet=True)
+    full = tmp_path / "full"
+    convert(opts(tmp_path, outdir=str(full), samples=24, batch_size=12, method="mesh"))
+    render_outdir(full, quiet=True)
+    np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(full / "image.exr"))

@@ -140,8 +140,13 @@ def run_composite(args) -> int:
 
 
 def run_batch(args) -> int:
+    import signal
+    import sys
     from ..render import render_batch
-    render_batch(args.outdir, args.batch)
+    # Terminated (an interrupted 'povlens render', or make): unwind, so the batch
+    # stops the POV-Ray processes it started and removes their partial files.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
+    render_batch(args.outdir, args.batch, in_flight=args.in_flight)
     return 0
 
 
@@ -165,7 +170,8 @@ def register(sub) -> None:
                                    "Re-running resumes an interrupted render.")
     _add_convert_arguments(p)
     p.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1,
-                   help="POV-Ray processes at once (default: number of cores)")
+                   help="render workers at once, each tracing lens samples and running up "
+                        "to 4 POV-Ray processes (default: number of cores)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=run_render)
 
@@ -179,6 +185,9 @@ def register(sub) -> None:
     p = sub.add_parser("render-batch", help="render one batch of lens samples (used by make)")
     p.add_argument("outdir", metavar="OUTDIR")
     p.add_argument("batch", type=int, metavar="BATCH")
+    p.add_argument("--in-flight", type=int, default=4, metavar="N",
+                   help="POV-Ray processes running at once (default 4: each spends most of "
+                        "its ~0.6 s start-up idle, so several overlap on one core)")
     p.set_defaults(func=run_batch)
 
     p = sub.add_parser("render-view", help="render the pinhole or focal-blur view (used by make)")
