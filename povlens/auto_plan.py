@@ -2,15 +2,19 @@
 
 The choice is made from measurements, not guesses:
 
-1. **Depth range** — :func:`measure_depth_range` converts the scene as
-   ``pinhole`` into a small temporary probe folder (at most 64 pixels wide, same
-   film in mm) and runs :func:`povlens.depth_probe.probe_depth` (two fogged
-   POV-Ray renders).  Near and far are robust percentiles (1st / 99th) of the
+1. **Depth range** — :func:`start_depth_probe` renders a small pinhole depth
+   probe (:mod:`povlens.depth_probe`: two fogged POV-Ray renders, run at the
+   same time) of the plan's own camera (``povray_camera``: the same film in mm,
+   so the same view) at most 64 pixels wide, in a temporary folder in OUTDIR.
+   :func:`povlens.convert.convert` starts it before it builds the pupil table and
+   measures the plan's model error, and collects it after.  Near and far are
+   robust percentiles (1st / 99th) of the
    axial distances of the pixels that hit something; if more than 1 % of the
    pixels see background, far is infinity.  Depths are converted to camera-frame
    z in mm (the thin-lens model's frame: ``centre_z_mm + axial distance``).
 2. **Model error over that range** — :func:`povlens.thin_lens.measure_model_error`
-   with the exact tracer through the pupil at depths spanning [near, far].
+   with the exact tracer through the pupil at depths spanning [near, far], with
+   the plan's exit-pupil table (built once, kept in OUTDIR/pupil.npz).
 3. **Decision** — :func:`decide`, pure:
 
    * ``pinhole`` when the thin-lens circle of confusion over [near, far], the
@@ -36,15 +40,13 @@ The choice is made from measurements, not guesses:
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 __all__ = ["decide", "blur_range_px", "measure_depth_range", "choose_method", "adaptive_rows",
-           "measure_depth_map", "sample_row_ranges",
+           "measure_depth_map", "start_depth_probe", "probe_axial_mm", "sample_row_ranges",
            "model_depths", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "VIGNETTING_TOLERANCE"]
 
 #: Largest spacing in pixels between the film copies of one blurred point (target noise).
@@ -188,24 +190,53 @@ def _depth_limits(axial_mm: np.ndarray) -> tuple[float, float, dict]:
     return near, far, info
 
 
-def measure_depth_map(opts, film, threads: int | None = None) -> np.ndarray:
-    """Per-pixel axial distances (mm, from the camera location = entrance pupil; inf
-    for background) of a small pinhole depth probe in a temporary folder
-    (at most :data:`PROBE_WIDTH` pixels wide, same film in mm)."""
-    from .convert import convert, read_plan
-    from .depth_probe import axial_depth, probe_depth
+def probe_size(film) -> tuple[int, int]:
+    """(width, height) in pixels of the depth probe of ``film``: at most
+    :data:`PROBE_WIDTH` wide, the film's aspect, at least 2 rows."""
     pw = min(PROBE_WIDTH, film.width_px)
     ph = max(2, round(pw * film.height_px / film.width_px))
+    return pw, ph
+
+
+def start_depth_probe(opts, film, plan: dict, threads: int = 1):
+    """Start the small pinhole depth probe of ``opts`` (:func:`probe_size` pixels);
+    returns a running :class:`povlens.depth_probe.DepthProbe` (collect it with
+    :func:`probe_axial_mm`).
+
+    ``plan`` is a plan of ``opts`` (any method, or the part
+    :func:`povlens.convert._start_plan` derives): its ``povray_camera`` is the
+    probe's, since the probe's film is the same in mm; only the pixels differ.
+    The renders run in a temporary folder ``.probe.*`` in OUTDIR (``threads``
+    POV-Ray threads each)."""
+    from .depth_probe import start_probe
+    pw, ph = probe_size(film)
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=".probe.", dir=out) as tmp:
-        popts = dataclasses.replace(opts, outdir=tmp, method="pinhole", samples=1,
-                                    width=pw, height=ph, adaptive=False,
-                                    film_size_mm=(film.width_mm, film.height_mm))
-        convert(popts)
-        plan = read_plan(tmp)
-        d = probe_depth(tmp, threads=threads)
-        return axial_depth(plan, d) * plan["mm_per_unit"]
+    probe_plan = {"povray_camera": plan["povray_camera"], "mm_per_unit": plan["mm_per_unit"],
+                  "inputs": {"scene": str(Path(opts.scene).resolve()), "focus": opts.focus}}
+    return start_probe(probe_plan, out, width=pw, height=ph, threads=threads,
+                       keep_wrappers=False, prefix=".probe.", label=str(opts.scene))
+
+
+def probe_axial_mm(probe) -> np.ndarray:
+    """Wait for a :func:`start_depth_probe` probe: per-pixel axial distances (mm, from
+    the camera location = entrance pupil; inf for background)."""
+    from .depth_probe import axial_depth
+    d = probe.result()
+    return axial_depth(probe.plan, d) * probe.plan["mm_per_unit"]
+
+
+def measure_depth_map(opts, film, threads: int | None = None,
+                      plan: dict | None = None) -> np.ndarray:
+    """Per-pixel axial distances (mm, from the camera location = entrance pupil; inf
+    for background) of a small pinhole depth probe (:func:`start_depth_probe`,
+    at most :data:`PROBE_WIDTH` pixels wide, same film in mm).  ``plan``: a plan
+    of ``opts`` for its camera (default: derived, without a pupil table)."""
+    if plan is None:
+        from .convert import _start_plan
+        st = _start_plan(opts)
+        plan = {"povray_camera": st.povray_camera, "mm_per_unit": st.mm_per_unit}
+    return probe_axial_mm(start_depth_probe(opts, film, plan, threads=threads or 1))
 
 
 def measure_depth_range(opts, film, threads: int | None = None,
@@ -277,12 +308,30 @@ def sample_row_ranges(adaptive: dict, height: int) -> list[list[int]]:
     return rows
 
 
-def choose_method(opts, plan: dict, model, lens, film) -> dict:
+def choose_method(opts, plan: dict, model, lens, film, *, probe=None,
+                  pupil_table=None) -> dict:
     """Measure the scene's depth range and the model error over it, and decide.
 
-    ``plan`` / ``model`` / ``lens`` / ``film`` are those of ``opts`` (any method)."""
+    ``plan`` / ``model`` / ``lens`` / ``film`` are those of ``opts`` (any method).
+    ``probe``: the depth probe, already started (:func:`start_depth_probe`;
+    default: started here).  ``pupil_table``: the plan's exit-pupil table (default:
+    OUTDIR/pupil.npz if current, else built)."""
     from .thin_lens import measure_model_error
-    axial = measure_depth_map(opts, film)
+    if probe is None:
+        probe = start_depth_probe(opts, film, plan)
+    fd = plan["focus"]["film_distance_mm"]
+    table = pupil_table
+    try:
+        if table is None:  # exact vignetting; normally saved by the plan
+            from .pupil import build_pupil_table, load_if_current
+            table = load_if_current(Path(opts.outdir) / "pupil.npz", lens, fd,
+                                    film.half_diagonal_mm)
+            if table is None:
+                table = build_pupil_table(lens, fd, film.half_diagonal_mm)
+    except BaseException:
+        probe.cancel()
+        raise
+    axial = probe_axial_mm(probe)
     near_d, far_d, info = measure_depth_range(opts, film, axial_mm=axial)
     if math.isinf(near_d):  # nothing but background: everything at infinity
         near_d = 1e4 * max(model.focus_distance_mm if math.isfinite(model.focus_distance_mm)
@@ -290,9 +339,6 @@ def choose_method(opts, plan: dict, model, lens, film) -> dict:
     c = model.centre_z_mm
     near_z, far_z = c + near_d, c + far_d
     depths = model_depths(model, near_z, far_z)
-    from .pupil import build_pupil_table
-    fd = plan["focus"]["film_distance_mm"]
-    table = build_pupil_table(lens, fd, film.half_diagonal_mm)  # exact vignetting
     err = measure_model_error(lens, fd, model, film, depths, pupil_table=table)
     d = decide(near_z_mm=near_z, far_z_mm=far_z, model=model, model_error=err,
                pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.tolerance_px,

@@ -35,7 +35,6 @@ import numpy as np
 from .errors import PovlensError, UsageError
 from .film import Film
 from .focus import exact_film_distance_mm, thick_lens_film_distance_mm, UNITS_MM
-from .lens_camera import ScenePlacement
 from .paraxial import paraxial_data, stopped_down
 from .povray import povray_version
 from .mesh_camera import (SINK_RADIUS, _pov_string, _template, _vec, default_sink_centre,
@@ -144,6 +143,35 @@ def make_plan(opts: ConvertOptions) -> dict:
 
 def _make_plan(opts: ConvertOptions):
     """(plan, lens, model, film) of ``opts`` (a concrete method)."""
+    return _finish_plan(opts, _start_plan(opts))[:4]
+
+
+@dataclasses.dataclass
+class _PlanStart:
+    """The first part of a plan: validated inputs, the focused lens, its thin-lens
+    model and the POV-Ray pinhole camera (no pupil table, no model error yet).
+    Nothing in it depends on the method or the sample count."""
+
+    mm_per_unit: float
+    lens: object
+    paraxial: object
+    film: Film
+    focus_mm: float
+    film_d: float
+    object_d: float
+    thick_d: float
+    spot: float | None
+    model: object
+    loc: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    fwd: np.ndarray
+    cam_source: str
+    povray_camera: dict
+
+
+def _start_plan(opts: ConvertOptions) -> _PlanStart:
+    """Validate ``opts`` and derive the camera (:class:`_PlanStart`); cheap (no pupil table)."""
     if opts.method not in METHODS:
         raise UsageError(f"--method {opts.method}: unknown method", f"use one of {', '.join(METHODS)}")
     if opts.units not in UNITS_MM:
@@ -168,30 +196,6 @@ def _make_plan(opts: ConvertOptions):
     film_d, object_d, thick_d, spot = _focus(lens, p, focus_mm, opts.real_focus)
     model = fit_thin_lens(lens, film_d, object_d, film)
     loc, right, up, fwd, cam_source = _camera_basis(opts)
-    placement = ScenePlacement.at_entrance_pupil(loc, right, up, fwd, model.centre_z_mm,
-                                                 mm_per_unit)
-    # Depths at which the model is checked: half, once, twice and ten times the focus.
-    if math.isinf(object_d):
-        depths = [model.centre_z_mm + k * 1000.0 * p.efl for k in (1, 10, 100)]
-    else:
-        s = object_d - model.centre_z_mm
-        depths = [model.centre_z_mm + k * s for k in (0.5, 1.0, 2.0, 10.0)]
-    # Vignetting from the exact exit-pupil table; saved in OUTDIR for the render to reuse.
-    table_path = Path(opts.outdir) / "pupil.npz"
-    table = (load_if_current(table_path, lens, film_d, film.half_diagonal_mm)
-             if table_path.exists() else None)
-    if table is None:
-        table = build_pupil_table(lens, film_d, film.half_diagonal_mm)
-        if table_path.parent.is_dir():
-            table.save(table_path)
-    model_error = measure_model_error(lens, film_d, model, film, depths, pupil_table=table)
-
-    version = povray_version()
-    rw, rh, drop = render_size(film.width_px, film.height_px, version)
-    # Each POV-Ray process renders a batch of samples as animation frames: start-up
-    # (~0.6 s) is paid once per batch.  By default, one batch per core.
-    bs = opts.batch_size or math.ceil(opts.samples / (os.cpu_count() or 1))
-    batches = [list(range(b, min(b + bs, opts.samples))) for b in range(0, opts.samples, bs)]
     pov = {
         "location": loc.tolist(), "direction": fwd.tolist(),
         "right": (right * film.width_mm / model.image_distance_mm).tolist(),
@@ -201,6 +205,48 @@ def _make_plan(opts: ConvertOptions):
                            if math.isfinite(model.focus_distance_mm) else 1e9),
         "hfov_deg": math.degrees(2 * math.atan(0.5 * film.width_mm / model.image_distance_mm)),
     }
+    return _PlanStart(mm_per_unit, lens, p, film, focus_mm, film_d, object_d, thick_d, spot,
+                      model, loc, right, up, fwd, cam_source, pov)
+
+
+def _finish_plan(opts: ConvertOptions, st: _PlanStart, *, pupil_table=None, model_error=None,
+                 version=povray_version):
+    """(plan, lens, model, film, pupil table) of ``opts`` from :func:`_start_plan`'s part.
+
+    ``pupil_table`` / ``model_error``: already computed for the same lens, focus and
+    film (they do not depend on the method or the samples); ``version`` is called
+    for POV-Ray's version."""
+    from .lens_camera import ScenePlacement   # (imports scipy.stats: only when needed)
+    lens, p, film, model = st.lens, st.paraxial, st.film, st.model
+    object_d, film_d, mm_per_unit = st.object_d, st.film_d, st.mm_per_unit
+    loc, right, up, fwd = st.loc, st.right, st.up, st.fwd
+    placement = ScenePlacement.at_entrance_pupil(loc, right, up, fwd, model.centre_z_mm,
+                                                 mm_per_unit)
+    # Depths at which the model is checked: half, once, twice and ten times the focus.
+    if math.isinf(object_d):
+        depths = [model.centre_z_mm + k * 1000.0 * p.efl for k in (1, 10, 100)]
+    else:
+        s = object_d - model.centre_z_mm
+        depths = [model.centre_z_mm + k * s for k in (0.5, 1.0, 2.0, 10.0)]
+    # Vignetting from the exact exit-pupil table; saved in OUTDIR for the render to reuse.
+    table = pupil_table
+    if table is None:
+        table_path = Path(opts.outdir) / "pupil.npz"
+        table = (load_if_current(table_path, lens, film_d, film.half_diagonal_mm)
+                 if table_path.exists() else None)
+        if table is None:
+            table = build_pupil_table(lens, film_d, film.half_diagonal_mm)
+            if table_path.parent.is_dir():
+                table.save(table_path)
+    if model_error is None:
+        model_error = measure_model_error(lens, film_d, model, film, depths, pupil_table=table)
+
+    version = version()
+    rw, rh, drop = render_size(film.width_px, film.height_px, version)
+    # Each POV-Ray process renders a batch of samples as animation frames: start-up
+    # (~0.6 s) is paid once per batch.  By default, one batch per core.
+    bs = opts.batch_size or math.ceil(opts.samples / (os.cpu_count() or 1))
+    batches = [list(range(b, min(b + bs, opts.samples))) for b in range(0, opts.samples, bs)]
     return {
         "povlens_plan": PLAN_VERSION,
         "inputs": {
@@ -212,7 +258,7 @@ def _make_plan(opts: ConvertOptions):
             "samples": opts.samples, "batch_size": opts.batch_size, "seed": opts.seed,
             "real_focus": opts.real_focus, "vignetting": opts.vignetting,
             "jitter": opts.jitter, "adaptive": bool(opts.adaptive),
-            "camera_from": cam_source,
+            "camera_from": st.cam_source,
         },
         "lens": {
             "surfaces": lens.n_surfaces, "stop_index": p.stop_index,
@@ -221,21 +267,21 @@ def _make_plan(opts: ConvertOptions):
             "entrance_pupil_diameter_mm": p.entrance_pupil_diameter,
         },
         "focus": {
-            "focus_from_camera_mm": focus_mm, "object_distance_from_film_mm": object_d,
-            "film_distance_mm": film_d, "thick_lens_film_distance_mm": thick_d,
-            "rms_spot_mm": spot,
+            "focus_from_camera_mm": st.focus_mm, "object_distance_from_film_mm": object_d,
+            "film_distance_mm": film_d, "thick_lens_film_distance_mm": st.thick_d,
+            "rms_spot_mm": st.spot,
         },
         "film": dataclasses.asdict(film) | {"pixel_pitch_mm": film.pixel_pitch_mm},
         "mm_per_unit": mm_per_unit,
         "placement": placement.to_dict(),
         "thin_lens": model.to_dict(),
-        "povray_camera": pov,
+        "povray_camera": dict(st.povray_camera),
         "model_error": model_error,
         "povray": {"version": version, "render_width": rw, "render_height": rh,
                    "drop_top_rows": drop},
         "sink_centre": default_sink_centre(loc, fwd).tolist(),
         "batches": batches,
-    }, lens, model, film
+    }, lens, model, film, table
 
 
 def _write_if_changed(path: Path, text: str) -> None:
@@ -299,14 +345,30 @@ def convert(opts: ConvertOptions) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     decision = None
     requested = opts
+    reuse = None
     if opts.method == "auto":
-        from .auto_plan import choose_method
+        from .auto_plan import choose_method, start_depth_probe
         if not (opts.tolerance_px > 0 and math.isfinite(opts.tolerance_px)):
             raise UsageError(f"--tolerance {opts.tolerance_px}: must be a positive number of "
                              "pixels")
         base = dataclasses.replace(opts, method="mesh")
-        plan0, lens, model, film = _make_plan(base)       # validates the inputs first
-        decision = choose_method(base, plan0, model, lens, film)
+        start = _start_plan(base)                         # validates the inputs first
+        # The depth probe's POV-Ray processes (mostly idle start-up) and 'povray
+        # --version' run while the pupil table is built and the model error measured.
+        probe = start_depth_probe(base, start.film, {"povray_camera": start.povray_camera,
+                                                     "mm_per_unit": start.mm_per_unit})
+        try:
+            version = _in_background(povray_version)
+            plan0, lens, model, film, table = _finish_plan(base, start, version=version)
+            decision = choose_method(base, plan0, model, lens, film, probe=probe,
+                                     pupil_table=table)
+        except BaseException:
+            probe.cancel()
+            raise
+        # The plan of the chosen method differs from plan0 only in the method, the
+        # samples and the batches: same table, same model error.
+        reuse = {"pupil_table": table, "model_error": plan0["model_error"],
+                 "version": lambda: plan0["povray"]["version"]}
         samples = decision["samples"] if opts.auto_samples else opts.samples
         if not opts.auto_samples:
             decision["reasons"].append(f"--samples {opts.samples} given: it replaces the "
@@ -328,7 +390,7 @@ def convert(opts: ConvertOptions) -> dict:
         opts = dataclasses.replace(opts, samples=max(adaptive["band_samples"]))
     elif decision is not None:
         decision.pop("adaptive", None)
-    plan = make_plan(opts)
+    plan = make_plan(opts) if reuse is None else _finish_plan(opts, start, **reuse)[0]
     if adaptive is not None:
         _adaptive_batches(plan, adaptive, opts)
     if decision is not None:
@@ -361,6 +423,16 @@ def convert(opts: ConvertOptions) -> dict:
     _write_if_changed(out / "Makefile", _makefile(plan))
     _write_json(out / "plan.json", _sanitize(plan))
     return plan
+
+
+def _in_background(fn):
+    """Run ``fn()`` in a thread; returns a function that waits for its result (or
+    raises its exception)."""
+    from concurrent.futures import ThreadPoolExecutor
+    pool = ThreadPoolExecutor(max_workers=1)
+    future = pool.submit(fn)
+    pool.shutdown(wait=False)
+    return future.result
 
 
 def _adaptive_batches(plan: dict, adaptive: dict, opts: ConvertOptions) -> None:

@@ -31,17 +31,27 @@ d = 5 D.  Pixels with f below :data:`BACKGROUND_F` (d beyond about 8 D) are
 reported as ``inf`` (background).  The default D is twice the plan's focus
 distance.
 
-The probe renders ``depth_fog_black.pov`` and ``depth_fog_white.pov``, written
-next to ``pinhole.pov`` (same scene include, same camera, plus the fog), into a
-temporary folder that is removed afterwards.  Distances are along each pixel's
-ray from the camera location (the entrance pupil) in scene units; see
-:func:`axial_depth` for the distance along the viewing direction.
+The probe renders ``depth_fog_black.pov`` and ``depth_fog_white.pov`` (the
+plan's scene include and pinhole camera, plus the fog) as two POV-Ray processes
+running at the same time (:func:`start_probe`; they share the cores, ``+WT1``
+each on two): a small render spends most of its ~0.7 s wall time idle in
+POV-Ray's start-up, so the pair takes about as long as one.  The images go to a temporary folder that is removed
+afterwards.  :func:`probe_depth` probes a render folder: its wrappers are written
+next to ``pinhole.pov``.  The ``--method auto`` probe
+(:func:`povlens.auto_plan.start_depth_probe`) renders the main plan's camera at
+a smaller size, wrappers and images in one temporary folder; it runs while
+povlens builds the pupil table.  If either render fails, the other is stopped
+and POV-Ray's message is raised (:class:`~povlens.errors.PovrayError`).
+Distances are along each pixel's ray from the camera location (the entrance
+pupil) in scene units; see :func:`axial_depth` for the distance along the
+viewing direction.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -49,12 +59,11 @@ import numpy as np
 
 from .convert import read_plan
 from .errors import PovlensError
-from .images import read_image
 from .mesh_camera import pinhole_wrapper, write_text
-from .povray import render as povray_render
+from .povray import start_render
 
-__all__ = ["probe_depth", "fog_wrapper", "ray_directions", "axial_depth", "distance_from_fog",
-           "BACKGROUND_F"]
+__all__ = ["probe_depth", "start_probe", "DepthProbe", "fog_wrapper", "ray_directions",
+           "axial_depth", "distance_from_fog", "BACKGROUND_F"]
 
 #: Fog transmittance below which a pixel counts as background (d > ~8.3 D).
 BACKGROUND_F = 2.5e-4
@@ -110,31 +119,89 @@ def probe_depth(outdir: str | os.PathLike, fog_distance: float | None = None,
                 threads: int | None = None) -> np.ndarray:
     """Per-pixel distance (H, W) float64 in scene units of the folder's pinhole view,
     ``inf`` where the ray hits nothing.  ``fog_distance`` D defaults to twice the
-    focus distance (scene units)."""
+    focus distance (scene units); ``threads`` per render (the two run at once;
+    default half the cores, at least 1)."""
     outdir = Path(outdir)
-    plan = read_plan(outdir)
+    return start_probe(read_plan(outdir), outdir, fog_distance=fog_distance,
+                       threads=threads).result()
+
+
+def start_probe(plan: dict, folder: str | os.PathLike, *, width: int | None = None,
+                height: int | None = None, fog_distance: float | None = None,
+                threads: int | None = None, keep_wrappers: bool = True,
+                prefix: str = ".depth.", label: str | None = None) -> "DepthProbe":
+    """Start the two fogged renders of ``plan``'s pinhole view; returns at once.
+
+    ``plan`` needs ``povray_camera``, ``inputs.scene`` and ``inputs.focus`` (and
+    ``film.width_px`` / ``height_px`` unless ``width`` / ``height`` are given:
+    the probe may be smaller than the plan's film; the view is the same).
+    A temporary folder ``prefix*`` in ``folder`` holds the images; the wrappers
+    ``depth_fog_{black,white}.pov`` are written to ``folder`` if
+    ``keep_wrappers``, else into the temporary folder.  ``label`` names the probe
+    in errors (default ``folder``).  Collect with :meth:`DepthProbe.result`."""
+    folder = Path(folder)
     if fog_distance is None:
         focus = float(plan["inputs"]["focus"])
         fog_distance = 2.0 * focus if math.isfinite(focus) and focus > 0 else 10.0
     if not (fog_distance > 0 and math.isfinite(fog_distance)):
         raise PovlensError(f"fog distance {fog_distance}: must be positive and finite")
+    w = int(plan["film"]["width_px"] if width is None else width)
+    h = int(plan["film"]["height_px"] if height is None else height)
+    if threads is None:
+        threads = max(1, (os.cpu_count() or 1) // 2)
+    probe_plan = dict(plan, film=dict(plan.get("film", {}), width_px=w, height_px=h))
+    scene = Path(plan["inputs"]["scene"])
     cam = plan["povray_camera"]
-    scene_inc = os.path.relpath(plan["inputs"]["scene"], outdir)
-    base = pinhole_wrapper(scene_inc, cam["location"], cam["direction"], cam["right"], cam["up"])
-    w, h = plan["film"]["width_px"], plan["film"]["height_px"]
-    images = {}
-    with tempfile.TemporaryDirectory(prefix=".depth.", dir=outdir) as tmp:
+    tmp = Path(tempfile.mkdtemp(prefix=prefix, dir=folder))
+    wrappers = folder if keep_wrappers else tmp
+    probe = DepthProbe(probe_plan, float(fog_distance), tmp, label or str(folder))
+    try:
+        base = pinhole_wrapper(os.path.relpath(scene, wrappers), cam["location"],
+                               cam["direction"], cam["right"], cam["up"])
         for name, white in (("black", False), ("white", True)):
-            pov = write_text(outdir / f"depth_fog_{name}.pov",
+            pov = write_text(wrappers / f"depth_fog_{name}.pov",
                              fog_wrapper(base, fog_distance, white))
-            out = Path(tmp) / f"{name}.exr"
-            povray_render(pov, out, w, h, threads=threads or os.cpu_count() or 1,
-                          library_paths=[Path(plan["inputs"]["scene"]).parent])
-            images[name] = read_image(out)
-    d = distance_from_fog(images["white"], images["black"], fog_distance)
-    if np.all(d[np.isfinite(d)] < 1e-3 * fog_distance) and np.isfinite(d).any():
-        raise PovlensError(
-            f"{outdir}: the depth probe's fog had no effect: the camera seems to be inside a "
-            f"solid object (POV-Ray applies no fog inside objects that are not 'hollow')",
-            "make the object around the camera hollow, or flip the plane's normal")
-    return d
+            probe._jobs[name] = start_render(pov, tmp / f"{name}.exr", w, h, threads=threads,
+                                             library_paths=[scene.parent])
+    except BaseException:
+        probe.cancel()
+        raise
+    return probe
+
+
+class DepthProbe:
+    """The two running renders of a depth probe (:func:`start_probe`).
+
+    ``plan`` is the plan as the probe sees it (``film.width_px`` / ``height_px``
+    the probe's size), for :func:`ray_directions` / :func:`axial_depth`."""
+
+    def __init__(self, plan: dict, fog_distance: float, tmp: Path, label: str):
+        self.plan, self.fog_distance, self.label = plan, fog_distance, label
+        self._tmp = tmp
+        self._jobs: dict = {}
+
+    def result(self) -> np.ndarray:
+        """Wait for both renders; per-pixel distances (H, W) in scene units, ``inf``
+        where the ray hits nothing.  Raises POV-Ray's error if a render failed (the
+        other is stopped), :class:`PovlensError` if the fog had no effect."""
+        from .images import read_image   # (OpenImageIO: imported while POV-Ray runs)
+        try:
+            images = {name: read_image(job.wait()) for name, job in self._jobs.items()}
+        finally:
+            self.cancel()
+        d = distance_from_fog(images["white"], images["black"], self.fog_distance)
+        if np.all(d[np.isfinite(d)] < 1e-3 * self.fog_distance) and np.isfinite(d).any():
+            raise PovlensError(
+                f"{self.label}: the depth probe's fog had no effect: the camera seems to be "
+                f"inside a solid object (POV-Ray applies no fog inside objects that are not "
+                f"'hollow')",
+                "make the object around the camera hollow, or flip the plane's normal")
+        return d
+
+    def cancel(self) -> None:
+        """Stop the renders still running and remove the temporary folder."""
+        try:
+            for job in self._jobs.values():
+                job.cancel()
+        finally:
+            shutil.rmtree(self._tmp, ignore_errors=True)

@@ -81,3 +81,21 @@ def test_plan_command_records_the_decision(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert text.returncode == 0, text.stderr
     assert f"method {d['method']}" in text.stdout and "max_distortion_px" in text.stdout
+
+
+def test_auto_plan_numbers_equal_a_plan_of_the_chosen_method(tmp_path):
+    """convert(auto) reuses the pupil table and model error of its first plan: the plan
+    must be what make_plan gives for the chosen method and samples."""
+    import dataclasses
+
+    from povlens.convert import convert, make_plan
+    opts = ConvertOptions(scene=PAPER, lens="dgauss.50mm", focus=4, outdir=str(tmp_path / "a"),
+                          width=40, height=30, method="auto")
+    plan = convert(opts)
+    d = plan.pop("decision")
+    for k in ("requested_method", "tolerance_px", "auto_samples"):
+        plan["inputs"].pop(k)
+    again = make_plan(dataclasses.replace(opts, outdir=str(tmp_path / "b"), method=d["method"],
+                                          samples=d["samples"]))
+    assert json.dumps(plan, sort_keys=True) == json.dumps(again, sort_keys=True)
+    assert (tmp_path / "a" / "pupil.npz").is_file() and not list((tmp_path / "a").glob(".probe.*"))

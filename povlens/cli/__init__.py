@@ -17,8 +17,15 @@ from ..errors import PovlensError
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ["inspect", "focus", "trace", "check", "plan", "render", "pupil", "compare", "bench", "report"]
 
+#: Commands registered by a module of another name (the others: ``<command>_cmd``).
+_MODULE_OF = {"convert": "render", "composite": "render", "render-batch": "render",
+              "render-view": "render"}
 
-def build_parser() -> argparse.ArgumentParser:
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``povlens`` parser.  With ``command`` (the first argument), only the module
+    of that command is imported (the others import numpy, scipy, OpenImageIO...);
+    an unknown command, ``--help`` and ``--version`` get every command."""
     parser = argparse.ArgumentParser(
         prog="povlens",
         description="Real camera lenses for POV-Ray: inspect and focus lens prescriptions, "
@@ -27,13 +34,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"povlens {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in COMMANDS:
+    module = _MODULE_OF.get(command, command)
+    names = [module] if module in COMMANDS else COMMANDS
+    for name in names:
         importlib.import_module(f".{name}_cmd", __name__).register(sub)
+    if names is not COMMANDS and command not in sub.choices:
+        return build_parser()
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv[0] if argv else None)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
