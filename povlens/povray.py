@@ -52,6 +52,7 @@ __all__ = [
     "render",
     "start_render",
     "RenderJob",
+    "output_written",
     "temporary_path",
     "atomic_output",
 ]
@@ -383,6 +384,36 @@ def start_render(
                      timeout, deadline)
 
 
+def output_written(pid: int, path: Path) -> bool:
+    """True once process ``pid`` has written ``path`` and closed it (Linux: no
+    descriptor in /proc/PID/fd points to it).
+
+    POV-Ray 3.7 writes its image in one go at the end of the render and then
+    spends ~0.3 s idle before it exits (measured: a 64x48 image appears 0.33 s
+    after the start, the process exits at 0.64-0.68 s).  The image is final once
+    closed, so the caller need not wait for the exit.  A process with children
+    (a wrapper script in POVLENS_POVRAY) is never judged early: False until it exits.
+    """
+    try:
+        if Path(path).stat().st_size == 0:
+            return False
+        for task in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{task}/children") as f:
+                if f.read().strip():
+                    return False
+        target = str(Path(path).resolve())
+        fd_dir = f"/proc/{pid}/fd"
+        for fd in os.listdir(fd_dir):
+            try:
+                if os.readlink(f"{fd_dir}/{fd}") == target:
+                    return False
+            except OSError:
+                continue
+        return True
+    except OSError:
+        return False
+
+
 class RenderJob:
     """A POV-Ray render started by :func:`start_render`."""
 
@@ -427,14 +458,23 @@ class RenderJob:
             self.proc.wait()
 
     def _collect(self) -> None:
-        remaining = None if self._deadline is None else max(0.0, self._deadline - time.monotonic())
-        try:
-            returncode = self.proc.wait(timeout=remaining)
-        except subprocess.TimeoutExpired:
-            raise PovrayError(
-                f"POV-Ray did not finish rendering {self.pov_path} within {self._timeout} s",
-                "render a smaller image, or raise the time limit",
-            ) from None
+        # Poll rather than wait: the image is final when POV-Ray has closed it,
+        # ~0.3 s before the process exits (output_written); it is stopped then.
+        while True:
+            returncode = self.proc.poll()
+            if returncode is not None:
+                break
+            if output_written(self.proc.pid, self._tmp):
+                self.proc.kill()  # SIGTERM would run POV-Ray's slow shutdown
+                self.proc.wait()
+                returncode = 0
+                break
+            if self._deadline is not None and time.monotonic() > self._deadline:
+                raise PovrayError(
+                    f"POV-Ray did not finish rendering {self.pov_path} within {self._timeout} s",
+                    "render a smaller image, or raise the time limit",
+                )
+            time.sleep(0.005)
         self._err.seek(0)
         stderr = io.TextIOWrapper(io.BytesIO(self._err.read()), errors="replace").read()
         log_text = self._log.read_text(errors="replace") if self._log.exists() else ""

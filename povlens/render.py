@@ -46,7 +46,7 @@ from .images import read_image, write_exr, write_png_srgb
 from .lens_camera import ScenePlacement, sample_points, sample_rays
 from .mesh_camera import write_ray_mesh, write_text
 from .paraxial import stopped_down
-from .povray import find_povray, render as povray_render
+from .povray import find_povray, output_written, render as povray_render
 from .prescription import read_lens
 
 __all__ = ["render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
@@ -224,12 +224,24 @@ class _SampleRenders:
                                     stdout=subprocess.DEVNULL, stderr=err)
         self.running[k] = (proc, tmp, time.perf_counter())
 
+    def _finished(self, proc: subprocess.Popen, tmp: Path) -> bool:
+        """POV-Ray exited, or wrote and closed its image (it then idles ~0.3 s
+        before exiting: :func:`povlens.povray.output_written`)."""
+        if proc.poll() is not None:
+            return True
+        if output_written(proc.pid, tmp / "f.exr"):
+            proc.kill()  # nothing left but its shutdown (SIGTERM would run it)
+            proc.wait()
+            proc.returncode = 0
+            return True
+        return False
+
     def _reap(self, block: bool) -> None:
         while True:
-            done = [k for k, (p, _, _) in self.running.items() if p.poll() is not None]
+            done = [k for k, (p, tmp, _) in self.running.items() if self._finished(p, tmp)]
             if done or not block:
                 break
-            time.sleep(0.01)
+            time.sleep(0.005)
         for k in done:
             proc, tmp, t0 = self.running.pop(k)
             self.povray_s += time.perf_counter() - t0

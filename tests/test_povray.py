@@ -139,3 +139,30 @@ def test_library_paths_resolve_scene_includes(tmp_path):
         povray.render(wrapper, work / "w.exr", 8, 6)
     povray.render(wrapper, work / "w.exr", 8, 6, library_paths=[scene_dir])
     np.testing.assert_allclose(read_image(work / "w.exr")[3, 4], [0.25, 0.5, 0.75], atol=1e-3)
+
+
+def test_image_is_taken_when_written_not_at_process_exit(tmp_path):
+    """POV-Ray idles ~0.3 s after closing its image; output_written sees the
+    closed file while the process still runs, and the image is complete."""
+    import subprocess
+    import time
+    scene = tmp_path / "s.pov"
+    scene.write_text(FLAT + "sphere { 0, 1 pigment { checker rgb 1 rgb 0 scale 0.2 } "
+                            "finish { ambient 1 diffuse 0 } }\n")
+    out = tmp_path / "a.exr"
+    proc = subprocess.Popen([povray.find_povray(), "-D", "-V", "-GR", "-GS", f"+I{scene}",
+                             f"+O{out}", "+FE", "+W64", "+H48", "-A", "+WT1"],
+                            cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    seen_while_running = False
+    while proc.poll() is None:
+        if povray.output_written(proc.pid, out):
+            seen_while_running = proc.poll() is None
+            shutil.copy(out, tmp_path / "early.exr")   # what a caller takes at once
+            break
+        time.sleep(0.002)
+    proc.wait()
+    assert seen_while_running
+    early = read_image(tmp_path / "early.exr")
+    full = povray.render(scene, tmp_path / "b.exr", 64, 48)
+    np.testing.assert_array_equal(early, read_image(full))
+    assert not povray.output_written(proc.pid, tmp_path / "missing.exr")
