@@ -407,7 +407,7 @@ def convert(opts: ConvertOptions) -> dict:
         except PovlensError:
             old = None
     if old is not None and old.get("inputs") != _sanitize(plan["inputs"]):
-        _invalidate_outputs(out)
+        _invalidate_outputs(out, _stale_samples(old, _sanitize(plan)))
     scene_inc = _scene_include(plan, out)
     cam = plan["povray_camera"]
     _write_if_changed(out / "pinhole.pov", pinhole_wrapper(
@@ -436,34 +436,67 @@ def _in_background(fn):
 
 
 def _adaptive_batches(plan: dict, adaptive: dict, opts: ConvertOptions) -> None:
-    """Per-sample row ranges (``sample_rows``, film rows [start, end)) and batches of
-    consecutive samples with the same rows (one POV-Ray row range per process)."""
+    """Per-sample row ranges (``sample_rows``, film rows [start, end)) and batches.
+
+    Every sample is its own POV-Ray process (:func:`povlens.render.render_samples`),
+    so a batch may mix row ranges; samples are dealt round-robin to the batches
+    (later samples render fewer rows, so contiguous batches would be unequal)."""
     from .auto_plan import sample_row_ranges
     h, w = plan["film"]["height_px"], plan["film"]["width_px"]
     rows = sample_row_ranges(adaptive, h)
     n = len(rows)
     bs = opts.batch_size or math.ceil(n / (os.cpu_count() or 1))
-    batches, cur = [], []
-    for k in range(n):
-        if cur and (rows[k] != rows[cur[0]] or len(cur) >= bs):
-            batches.append(cur)
-            cur = []
-        cur.append(k)
-    batches.append(cur)
-    plan["batches"] = batches
+    nb = math.ceil(n / bs)
+    plan["batches"] = [list(range(b, n, nb)) for b in range(nb)]
     plan["sample_rows"] = rows
     pixel_samples = sum((r1 - r0) * w for r0, r1 in rows)
     plan["adaptive"] = dict(adaptive, pixel_samples=pixel_samples,
                             uniform_pixel_samples=n * h * w)
 
 
-def _invalidate_outputs(out: Path) -> None:
-    """Inputs changed: earlier samples and images no longer belong to this plan."""
-    # pupil.npz stays: load_if_current checks its inputs; exposure.txt does not, so it goes.
-    for pattern in ("samples/*.exr", "samples/*.done", "samples/*.inc", "samples/*.blocked",
-                    "image.exr", "image.png", "exposure.txt", "view-*.exr"):
+#: Plan inputs that do not change what lens sample k renders: the sample count
+#: (scrambled-Sobol point k is the same for any count), how samples are batched,
+#: and how the method and count were chosen.  A change of these keeps rendered
+#: samples whose row range is unchanged.
+SAMPLE_INDEPENDENT_INPUTS = ("samples", "batch_size", "adaptive", "requested_method",
+                             "tolerance_px", "auto_samples")
+
+
+def _stale_samples(old: dict, new: dict) -> list[int] | None:
+    """Samples of the old plan that the new plan cannot reuse: ``None`` = all (an
+    input that changes every sample differs), else those whose rows changed or
+    that the new plan no longer has."""
+    oi = {k: v for k, v in old.get("inputs", {}).items() if k not in SAMPLE_INDEPENDENT_INPUTS}
+    ni = {k: v for k, v in new["inputs"].items() if k not in SAMPLE_INDEPENDENT_INPUTS}
+    if oi != ni:
+        return None
+    n_old, n_new = int(old["inputs"]["samples"]), int(new["inputs"]["samples"])
+    full_old = [0, old["film"]["height_px"]]
+    full_new = [0, new["film"]["height_px"]]
+
+    def rows(plan, k, full):
+        r = plan.get("sample_rows")
+        return list(r[k]) if r is not None else full
+
+    return [k for k in range(n_old)
+            if k >= n_new or rows(old, k, full_old) != rows(new, k, full_new)]
+
+
+def _invalidate_outputs(out: Path, stale: list[int] | None = None) -> None:
+    """Inputs changed: drop what no longer belongs to the plan.  ``stale`` lists the
+    lens samples to drop (None = every sample, and exposure.txt, which depends on
+    the lens, focus and film); images, views and batch markers always go."""
+    # pupil.npz stays: load_if_current checks its inputs.
+    patterns = ["samples/*.done", "samples/*.timing.json", "samples/*.inc", "image.exr",
+                "image.png", "view-*.exr"]
+    if stale is None:
+        patterns += ["samples/*.exr", "samples/*.blocked", "exposure.txt"]
+    for pattern in patterns:
         for f in out.glob(pattern):
             f.unlink()
+    for k in stale or []:
+        for suffix in (".exr", ".weight.exr", ".blocked"):
+            (out / "samples" / f"sample_{k:04d}{suffix}").unlink(missing_ok=True)
 
 
 def _batch_wrapper(plan: dict, out: Path, batch: int) -> str:

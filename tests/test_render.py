@@ -216,3 +216,27 @@ def test_interrupting_render_stops_povray_and_resumes(tmp_path):
     convert(opts(tmp_path, outdir=str(full), samples=24, batch_size=12, method="mesh"))
     render_outdir(full, quiet=True)
     np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(full / "image.exr"))
+
+
+def test_more_samples_reuse_the_rendered_ones(tmp_path):
+    """Raising N keeps samples 0..N-1 (Sobol point k does not depend on N): only the
+    new samples are traced and rendered, and the image equals a fresh render."""
+    out = tmp_path / "out"
+    convert(opts(tmp_path, samples=3, batch_size=3))
+    render_outdir(out, jobs=1, quiet=True)
+    s = out / "samples"
+    before = {k: (s / f"sample_{k:04d}.exr").stat().st_mtime_ns for k in range(3)}
+    convert(opts(tmp_path, samples=5, batch_size=5))
+    assert not (out / "image.exr").exists()
+    assert (out / "exposure.txt").exists()
+    rendered = render_batch(out, 0)
+    assert rendered == [3, 4]
+    assert {k: (s / f"sample_{k:04d}.exr").stat().st_mtime_ns for k in range(3)} == before
+    composite_outdir(out)
+    fresh = tmp_path / "fresh"
+    convert(opts(tmp_path, outdir=str(fresh), samples=5, batch_size=5))
+    render_outdir(fresh, jobs=1, quiet=True)
+    np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(fresh / "image.exr"))
+    # a change that alters every sample (the seed) drops them all
+    convert(opts(tmp_path, samples=5, batch_size=5, seed=3))
+    assert not list(s.glob("sample_*.exr")) and not (out / "exposure.txt").exists()
