@@ -143,7 +143,9 @@ def make_plan(opts: ConvertOptions) -> dict:
 
 def _make_plan(opts: ConvertOptions):
     """(plan, lens, model, film) of ``opts`` (a concrete method)."""
-    return _finish_plan(opts, _start_plan(opts))[:4]
+    start = _start_plan(opts)
+    # 'povray --version' (~0.2 s, idle) runs while the pupil table is built
+    return _finish_plan(opts, start, version=_in_background(povray_version))[:4]
 
 
 @dataclasses.dataclass
