@@ -78,6 +78,8 @@ class ConvertOptions:
     tolerance_px: float = 0.5          # method "auto": error budget in pixels
     auto_samples: bool = True          # method "auto": the decision sets the sample count
     adaptive: bool = False             # mesh: fewer samples in sharp row bands (depth probe)
+    speculate: bool = False            # method "auto": start the likely render while the
+                                       # depth probe runs (povlens render; not convert/plan)
 
 
 def _unit(v) -> np.ndarray:
@@ -359,14 +361,24 @@ def convert(opts: ConvertOptions) -> dict:
         # --version' run while the pupil table is built and the model error measured.
         probe = start_depth_probe(base, start.film, {"povray_camera": start.povray_camera,
                                                      "mm_per_unit": start.mm_per_unit})
+        speculative = None
         try:
             version = _in_background(povray_version)
             plan0, lens, model, film, table = _finish_plan(base, start, version=version)
+            if opts.speculate and opts.auto_samples:
+                speculative = _start_speculative_focal_blur(opts, plan0)
             decision = choose_method(base, plan0, model, lens, film, probe=probe,
                                      pupil_table=table)
         except BaseException:
             probe.cancel()
+            if speculative is not None:
+                speculative.cancel()
             raise
+        if speculative is not None and decision["method"] != "focal-blur":
+            speculative.cancel()
+            decision["reasons"].append("(the focal_blur render started while the probe ran "
+                                       "was stopped)")
+            speculative = None
         # The plan of the chosen method differs from plan0 only in the method, the
         # samples and the batches: same table, same model error.
         reuse = {"pupil_table": table, "model_error": plan0["model_error"],
@@ -414,17 +426,63 @@ def convert(opts: ConvertOptions) -> dict:
     cam = plan["povray_camera"]
     _write_if_changed(out / "pinhole.pov", pinhole_wrapper(
         scene_inc, cam["location"], cam["direction"], cam["right"], cam["up"]))
-    _write_if_changed(out / "focal_blur.pov", focal_blur_wrapper(
-        scene_inc, cam["location"], cam["direction"], cam["right"], cam["up"],
-        aperture=cam["aperture"], focal_distance=cam["focal_distance"],
-        blur_samples=opts.samples))
+    _write_if_changed(out / "focal_blur.pov", _focal_blur_text(plan, out))
     if opts.method == "mesh":
         (out / "samples").mkdir(exist_ok=True)
         for b, _ in enumerate(plan["batches"]):
             _write_if_changed(out / "samples" / f"batch_{b:03d}.pov", _batch_wrapper(plan, out, b))
     _write_if_changed(out / "Makefile", _makefile(plan))
     _write_json(out / "plan.json", _sanitize(plan))
+    if decision is not None and speculative is not None:
+        # the decision is the render already running: it becomes the folder's view
+        try:
+            speculative.wait()
+        except BaseException:
+            Path(speculative.out_path).unlink(missing_ok=True)
+            raise
+        os.replace(speculative.out_path, out / "view-focal-blur.exr")
     return plan
+
+
+def _blur_settings(plan: dict) -> dict:
+    """focal_blur sampling of a plan: ``blur_samples min, max`` (+ confidence and
+    variance for POV-Ray's adaptive sampling, as --method auto chooses it)."""
+    d = plan.get("decision", {}).get("focal_blur")
+    if d is not None and plan["inputs"].get("auto_samples", True):
+        return {"blur_samples": d["min"], "max_blur_samples": d["max"],
+                "confidence": d["confidence"], "variance": d["variance"]}
+    n = int(plan["inputs"]["samples"])
+    return {"blur_samples": n, "max_blur_samples": n, "confidence": None, "variance": None}
+
+
+def _focal_blur_text(plan: dict, out: Path) -> str:
+    cam = plan["povray_camera"]
+    return focal_blur_wrapper(
+        _scene_include(plan, out), cam["location"], cam["direction"], cam["right"], cam["up"],
+        aperture=cam["aperture"], focal_distance=cam["focal_distance"], **_blur_settings(plan))
+
+
+def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict):
+    """Start the focal_blur render --method auto would choose, unless the lens alone
+    rules it out (vignetting that is wanted, distortion over the budget).  Its
+    settings (:data:`povlens.auto_plan.FOCAL_BLUR_ADAPTIVE`) do not depend on the
+    depth probe, so it runs while the probe does; :func:`convert` keeps it if the
+    decision is focal-blur, else stops it.  Returns the RenderJob or None."""
+    from .auto_plan import FOCAL_BLUR_ADAPTIVE, VIGNETTING_TOLERANCE
+    from .povray import start_render
+    e = plan0["model_error"]
+    if opts.vignetting and e["min_relative_illumination"] < 1.0 - VIGNETTING_TOLERANCE:
+        return None
+    if e["max_distortion_px"] >= opts.tolerance_px:
+        return None
+    out = Path(opts.outdir)
+    guess = dict(plan0, inputs=dict(plan0["inputs"], auto_samples=True),
+                 decision={"focal_blur": FOCAL_BLUR_ADAPTIVE})
+    _write_if_changed(out / "focal_blur.pov", _focal_blur_text(guess, out))
+    film = plan0["film"]
+    return start_render(out / "focal_blur.pov", out / ".speculative-focal-blur.exr",
+                        film["width_px"], film["height_px"], threads=os.cpu_count() or 1,
+                        library_paths=[Path(plan0["inputs"]["scene"]).parent])
 
 
 def _in_background(fn):

@@ -390,6 +390,9 @@ def focal_blur_wrapper(
     aperture: float,
     focal_distance: float,
     blur_samples: int,
+    max_blur_samples: int | None = None,
+    confidence: float | None = None,
+    variance: float | None = None,
     assumed_gamma: float | None = None,
 ) -> str:
     """Wrapper ``.pov`` text: the scene through POV-Ray's own thin-lens blur.
@@ -399,21 +402,31 @@ def focal_blur_wrapper(
     ``aperture`` is POV-Ray's value, i.e. **twice** the lens diameter
     (reference §7.4); the focal plane is perpendicular to ``direction`` at
     ``focal_distance``; ``blur_samples N, N`` fixes N samples per pixel.
+    With ``max_blur_samples`` M > N, POV-Ray samples adaptively: at least N,
+    then more until its ``confidence`` / ``variance`` test passes or M are shot
+    (POV-Ray 3.7 documentation, "Focal Blur"; both default to POV-Ray's own).
     """
     aperture = float(aperture)
     fdist = float(focal_distance)
     n = int(blur_samples)
-    if not (aperture > 0 and fdist > 0 and n >= 1):
+    m = n if max_blur_samples is None else int(max_blur_samples)
+    if not (aperture > 0 and fdist > 0 and 1 <= n <= m):
         raise UsageError(
-            f"focal blur needs aperture > 0, focal distance > 0 and blur samples >= 1; "
-            f"got {aperture}, {fdist}, {blur_samples}"
+            f"focal blur needs aperture > 0, focal distance > 0 and 1 <= blur samples <= "
+            f"max blur samples; got {aperture}, {fdist}, {blur_samples}, {max_blur_samples}"
         )
+    if confidence is not None and not 0 < confidence < 1:
+        raise UsageError(f"focal blur confidence must be in (0, 1), got {confidence}")
+    if variance is not None and not variance > 0:
+        raise UsageError(f"focal blur variance must be > 0, got {variance}")
     d = np.asarray(direction, dtype=np.float64)
     fp = np.asarray(location, dtype=np.float64) + fdist * d / np.linalg.norm(d)
     blur = (
         f"  aperture {aperture:.17g}\n"
         f"  focal_point {_vec(fp)}\n"
-        f"  blur_samples {n}, {n}\n"
+        f"  blur_samples {n}, {m}\n"
+        + (f"  confidence {float(confidence):.9g}\n" if confidence is not None else "")
+        + (f"  variance {float(variance):.9g}\n" if variance is not None else "")
     )
     return _perspective({"blur": blur}, scene_include, location, direction, right, up, assumed_gamma)
 

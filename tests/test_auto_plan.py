@@ -99,3 +99,47 @@ def test_auto_plan_numbers_equal_a_plan_of_the_chosen_method(tmp_path):
                                           samples=d["samples"]))
     assert json.dumps(plan, sort_keys=True) == json.dumps(again, sort_keys=True)
     assert (tmp_path / "a" / "pupil.npz").is_file() and not list((tmp_path / "a").glob(".probe.*"))
+
+
+@pytest.mark.skipif(__import__("shutil").which("povray") is None, reason="POV-Ray not installed")
+def test_speculative_focal_blur_is_the_final_view(tmp_path):
+    """With speculate (povlens render), auto starts the adaptive focal_blur render while
+    the probe runs; when the decision is focal-blur, that render is the folder's view,
+    identical to rendering the final wrapper afterwards."""
+    import numpy as np
+    from povlens.convert import convert
+    from povlens.images import read_image
+    from povlens.render import render_outdir, render_view
+    root = pathlib.Path(__file__).resolve().parent.parent
+    base = dict(scene=str(root / "scenes" / "paper.pov"), lens="telephoto.250mm", focus=4.0,
+                width=48, height=36, method="auto")
+    spec = tmp_path / "spec"
+    plan = convert(ConvertOptions(outdir=str(spec), speculate=True, **base))
+    assert plan["inputs"]["method"] == "focal-blur"
+    assert (spec / "view-focal-blur.exr").exists()          # rendered during convert
+    assert "blur_samples 8, 256" in (spec / "focal_blur.pov").read_text()
+    assert not list(spec.glob(".speculative*")) and not list(spec.glob(".*.tmp*"))
+    render_outdir(spec, quiet=True)
+    plain = tmp_path / "plain"
+    convert(ConvertOptions(outdir=str(plain), **base))
+    assert not (plain / "view-focal-blur.exr").exists()     # convert alone renders nothing
+    assert (plain / "focal_blur.pov").read_text().replace(str(plain), "") == \
+        (spec / "focal_blur.pov").read_text().replace(str(spec), "")
+    render_view(plain, "focal-blur")
+    a, b = read_image(spec / "image.exr"), read_image(plain / "image.exr")
+    assert a.shape == b.shape
+    # POV-Ray's adaptive focal blur is deterministic up to thread scheduling
+    assert float(np.mean(np.abs(a - b))) < 0.01
+
+
+@pytest.mark.skipif(__import__("shutil").which("povray") is None, reason="POV-Ray not installed")
+def test_no_speculative_render_when_the_lens_vignettes(tmp_path):
+    from povlens.convert import convert
+    root = pathlib.Path(__file__).resolve().parent.parent
+    out = tmp_path / "d"
+    plan = convert(ConvertOptions(scene=str(root / "scenes" / "paper.pov"), lens="dgauss.50mm",
+                                  focus=4.0, width=48, height=36, method="auto", speculate=True,
+                                  outdir=str(out)))
+    assert plan["inputs"]["method"] == "mesh"
+    assert not (out / "view-focal-blur.exr").exists()
+    assert not list(out.glob(".speculative*"))

@@ -316,3 +316,21 @@ def test_thin_lens_meshes_match_focal_blur(scene, tmp_path):
     assert e_good < noise * 1.5  # within Monte-Carlo noise
     assert e_good < 0.006
     assert e_wrong > 3 * e_good
+
+
+def test_focal_blur_wrapper_adaptive_sampling_text():
+    from povlens.mesh_camera import focal_blur_wrapper
+    kw = dict(aperture=0.05, focal_distance=4.0)
+    fixed = focal_blur_wrapper("s.pov", [0, 0, 0], [0, 0, 1], [1.33, 0, 0], [0, 1, 0],
+                               blur_samples=16, **kw)
+    assert "blur_samples 16, 16" in fixed and "confidence" not in fixed
+    ad = focal_blur_wrapper("s.pov", [0, 0, 0], [0, 0, 1], [1.33, 0, 0], [0, 1, 0],
+                            blur_samples=8, max_blur_samples=256, confidence=0.95,
+                            variance=0.001, **kw)
+    assert "blur_samples 8, 256" in ad and "confidence 0.95" in ad and "variance 0.001" in ad
+    with pytest.raises(UsageError):
+        focal_blur_wrapper("s.pov", [0, 0, 0], [0, 0, 1], [1, 0, 0], [0, 1, 0],
+                           blur_samples=16, max_blur_samples=8, **kw)
+    with pytest.raises(UsageError):
+        focal_blur_wrapper("s.pov", [0, 0, 0], [0, 0, 1], [1, 0, 0], [0, 1, 0],
+                           blur_samples=8, max_blur_samples=16, confidence=1.5, **kw)

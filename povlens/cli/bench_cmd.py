@@ -26,6 +26,12 @@ def register(sub) -> None:
         "bench", help="measure run time against error: naive, pbrt-box and povlens lens "
                       "sampling, and focal_blur",
         description=bench.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--auto", action="store_true",
+                   help="benchmark --method auto against the fixed methods at equal error, "
+                        "on each bundled scene and lens (see povlens/bench_auto.py; writes "
+                        "auto.csv / auto.txt); uses --lenses, --reference-samples, --width, "
+                        "--height, --jobs, --out, --keep, --quick and --scenes")
+    p.add_argument("--scenes", help="--auto: comma-separated bundled scenes (default paper,chart)")
     p.add_argument("--quick", action="store_true",
                    help="the quick setting (48x36, one lens, N = 4,8,16; 1-2 minutes)")
     p.add_argument("--scene", help="POV-Ray scene (default scenes/paper.pov)")
@@ -49,7 +55,40 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def run_auto(args) -> int:
+    from ..bench_auto import AutoBenchSettings, run_auto_bench, SCENE_FOCUS
+    kw = {}
+    if args.quick:
+        kw.update(lenses=("telephoto.250mm",), scenes=("paper",), width=48, height=36,
+                  reference_samples=64, mesh_samples=(4, 8, 16), focal_blur_samples=(4, 8, 16),
+                  name="auto_quick")
+    for name in ("reference_samples", "width", "height", "jobs", "out", "keep"):
+        v = getattr(args, name)
+        if v is not None:
+            kw[name] = v
+    if args.samples:
+        kw["mesh_samples"] = kw["focal_blur_samples"] = args.samples
+    if args.lenses:
+        kw["lenses"] = tuple(t.strip() for t in args.lenses.split(",") if t.strip())
+    if args.scenes:
+        kw["scenes"] = tuple(t.strip() for t in args.scenes.split(",") if t.strip())
+        unknown = [x for x in kw["scenes"] if x not in SCENE_FOCUS]
+        if unknown:
+            raise UsageError(f"--scenes: {', '.join(unknown)} not a bundled scene",
+                             f"use some of {', '.join(SCENE_FOCUS)}")
+    if args.scene or args.focus:
+        raise UsageError("--auto runs the bundled scenes at their own focus distances",
+                         "use --scenes instead of --scene / --focus")
+    settings = AutoBenchSettings(**kw)
+    _, summary = run_auto_bench(settings, log=lambda m: print(m, flush=True))
+    print(summary)
+    print(f"\nwrote {settings.out}/{settings.name}.csv, .txt")
+    return 0
+
+
 def run(args) -> int:
+    if args.auto:
+        return run_auto(args)
     from ..bench import full_settings, quick_settings
     kw = {}
     for name in ("scene", "focus", "samples", "reference_samples", "width", "height", "jobs",

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 import os
 
 from ..convert import METHODS, ConvertOptions, convert
@@ -64,10 +66,11 @@ def _add_convert_arguments(p) -> None:
     p.add_argument("--no-jitter", action="store_true",
                    help="trace every pixel from its centre (no sub-pixel box filter), as "
                         "POV-Ray's perspective camera without anti-aliasing does")
-    p.add_argument("--adaptive", action="store_true",
+    p.add_argument("--adaptive", action=argparse.BooleanOptionalAction, default=None,
                    help="mesh renders: from a depth probe, give sharp row bands fewer lens "
                         "samples than bands deep in blur (later samples render only the "
-                        "blurred rows, POV-Ray +SR/+ER)")
+                        "blurred rows, POV-Ray +SR/+ER); default: on with --method auto "
+                        "(its probe is there anyway), off otherwise")
     p.add_argument("-o", "--outdir", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
 
@@ -89,7 +92,8 @@ def options_from_args(args) -> ConvertOptions:
         location=args.location, look_at=args.look_at, sky=args.sky,
         real_focus=not args.thick_lens_focus, vignetting=not args.no_vignetting,
         jitter=not args.no_jitter, tolerance_px=args.tolerance,
-        auto_samples=args.samples is None, adaptive=args.adaptive)
+        auto_samples=args.samples is None,
+        adaptive=(args.method == "auto") if args.adaptive is None else args.adaptive)
 
 
 def _summary(plan: dict) -> str:
@@ -124,7 +128,9 @@ def run_convert(args) -> int:
 
 def run_render(args) -> int:
     from ..render import render_outdir
-    plan = convert(options_from_args(args))
+    # render: a focal_blur render --method auto is likely to choose starts while the
+    # depth probe runs (convert and plan only decide)
+    plan = convert(dataclasses.replace(options_from_args(args), speculate=True))
     if not args.quiet:
         print(_summary(plan))
     out = render_outdir(args.outdir, jobs=args.jobs, quiet=args.quiet)
