@@ -51,6 +51,13 @@ def test_bench_auto_tiny(tmp_path, capsys):
     auto = rows[1]
     assert auto["chosen"] in ("pinhole", "focal-blur", "mesh")
     assert all(float(r["seconds"]) > 0 for r in rows)
-    assert all(float(r["rmse"]) > 0 for r in rows[1:])
+    assert all(float(r["rmse"]) > 0 for r in rows)   # reference row: its own noise
     text = (tmp_path / "auto_quick.txt").read_text()
     assert "auto/best" in text and "why auto chose" in text
+
+
+def test_corrected_rmse_removes_reference_noise_in_quadrature():
+    from povlens.bench_auto import corrected_rmse
+    assert corrected_rmse(0.05, 0.03) == pytest.approx(0.04)
+    assert corrected_rmse(0.05, 0.0) == pytest.approx(0.05)
+    assert corrected_rmse(0.05, 0.06) == pytest.approx(0.005)   # floored, never NaN
