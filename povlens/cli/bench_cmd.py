@@ -61,7 +61,7 @@ def run_auto(args) -> int:
     if args.quick:
         kw.update(lenses=("telephoto.250mm",), scenes=("paper",), width=48, height=36,
                   reference_samples=64, mesh_samples=(4, 8, 16), focal_blur_samples=(4, 8, 16),
-                  name="auto_quick")
+                  repeats=1, name="auto_quick")
     for name in ("reference_samples", "width", "height", "jobs", "out", "keep"):
         v = getattr(args, name)
         if v is not None:
