@@ -35,7 +35,16 @@ The choice is made from measurements, not guesses:
    as separate copies / structured noise:
    ``N = clamp(ceil(K b_max^2), 8, 256)`` with ``K = (pi/4) / SAMPLE_SPACING_PX^2``
    and b_max the largest blur in pixels (real or model) over the depth range.
-   Pinhole renders use 1 sample.
+   Pinhole renders use 1 sample.  A chosen focal_blur uses POV-Ray's adaptive
+   sampling instead (:data:`FOCAL_BLUR_ADAPTIVE`: 8 to 256 samples per pixel,
+   stopping when POV-Ray's confidence test passes), which needs no
+   depth-dependent count, so ``povlens render`` can start it while the probe
+   runs (:func:`povlens.convert.convert`, ``speculate``).
+4. **Adaptive mesh sampling** (on by default with auto) — :func:`adaptive_rows`:
+   per band of 8 rows the same rule from the probe's blur (floor 8), and
+   :func:`sample_row_ranges`: sample k renders only the rows of the bands that
+   need more than k samples (+SR/+ER); the composite divides each pixel by its own
+   sample count.
 """
 
 from __future__ import annotations
