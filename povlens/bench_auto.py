@@ -33,6 +33,7 @@ its RMSE is at most that.  The reference's own noise adds to every RMSE.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import math
@@ -47,7 +48,7 @@ import numpy as np
 from .bench import ROOT, rmse
 from .convert import ConvertOptions, convert
 from .images import read_image
-from .render import render_outdir
+from .render import Workers, render_outdir
 
 __all__ = ["AutoBenchSettings", "AutoRow", "run_auto_bench", "shift_rmse", "corrected_rmse",
            "time_at_error", "SCENE_FOCUS"]
@@ -136,8 +137,11 @@ def _render(opts: ConvertOptions, jobs: int, repeats: int = 1) -> tuple[float, n
     for _ in range(max(1, repeats)):
         shutil.rmtree(opts.outdir, ignore_errors=True)
         t0 = time.perf_counter()
-        plan = convert(opts)
-        render_outdir(opts.outdir, jobs=jobs, quiet=True)
+        # exactly what 'povlens render' does (povlens/cli/render_cmd.py)
+        with (Workers(opts.outdir, jobs) if opts.method in ("mesh", "auto") and jobs > 1
+              else contextlib.nullcontext()) as workers:
+            plan = convert(dataclasses.replace(opts, speculate=True))
+            render_outdir(opts.outdir, jobs=jobs, quiet=True, workers=workers)
         best = min(best, time.perf_counter() - t0)
     return best, read_image(Path(opts.outdir) / "image.exr")[..., :3], plan
 
@@ -184,7 +188,7 @@ def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]
                 def err(img):
                     return corrected_rmse(rmse(img, ref), ref_noise)
                 t, img, plan = _render(opts("auto", method="auto", tolerance_px=s.tolerance_px,
-                                            adaptive=s.adaptive, speculate=True), jobs,
+                                            adaptive=s.adaptive), jobs,
                                        s.repeats)
                 chosen = plan["inputs"]["method"]
                 n = int(plan["inputs"]["samples"])

@@ -49,7 +49,7 @@ from .paraxial import stopped_down
 from .povray import find_povray, output_written, render as povray_render
 from .prescription import read_lens
 
-__all__ = ["render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
+__all__ = ["Workers", "render_samples", "render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
            "lens_for"]
 
 
@@ -417,16 +417,71 @@ def _progress(total: int, desc: str, quiet: bool):
                 file=sys.stderr)
 
 
+class Workers:
+    """``povlens render-batch --wait`` processes started before the plan exists.
+
+    ``povlens render`` starts one per job for batches 0..jobs-1 before it converts,
+    so their start-up (Python and its libraries, ~0.5 s per process) overlaps the
+    conversion (and the depth probe of ``--method auto``).  :func:`render_outdir`
+    sends "go" to those whose batch needs rendering and "stop" to the others;
+    :meth:`close` stops any still waiting."""
+
+    def __init__(self, outdir: str | os.PathLike, jobs: int,
+                 in_flight: int = POVRAY_IN_FLIGHT):
+        self.outdir = Path(outdir)
+        self.procs: dict[int, subprocess.Popen] = {}
+        for b in range(max(1, int(jobs))):
+            self.procs[b] = subprocess.Popen(
+                [sys.executable, "-m", "povlens", "render-batch", str(self.outdir), str(b),
+                 "--in-flight", str(in_flight), "--wait"],
+                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                text=True, errors="replace")
+
+    def release(self, batches: set[int]) -> dict[int, subprocess.Popen]:
+        """Start the waiting workers of ``batches``, stop the rest; returns the started."""
+        started = {}
+        for b, p in self.procs.items():
+            go = b in batches
+            try:
+                p.stdin.write("go\n" if go else "stop\n")
+                p.stdin.close()
+            except OSError:
+                pass
+            if go:
+                started[b] = p
+            else:
+                p.stderr.close()
+                p.wait()
+        self.procs = {}
+        return started
+
+    def close(self) -> None:
+        self.release(set())
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        for p in self.procs.values():
+            p.terminate()
+            p.wait()
+        self.procs = {}
+
+
 def _run_batches_in_subprocesses(outdir: Path, batches: list[int], jobs: int, bar,
-                                 samples: list[int], in_flight: int = POVRAY_IN_FLIGHT) -> None:
+                                 samples: list[int], in_flight: int = POVRAY_IN_FLIGHT,
+                                 workers: Workers | None = None) -> None:
     """Run ``povlens render-batch`` for each batch, ``jobs`` at a time; ``bar``
-    counts the finished ``samples`` (polled from the sample folder).
+    counts the finished ``samples`` (polled from the sample folder).  ``workers``:
+    processes already started (and waiting) for some batches.
 
     Separate processes (as make runs them) rather than a fork-based pool: forking a
     process whose image and BLAS libraries have started threads can deadlock.
     """
     procs: dict[int, subprocess.Popen] = {}
-    pending = list(batches)
+    if workers is not None:
+        procs = workers.release(set(batches))
+    pending = [b for b in batches if b not in procs]
     failure = None
     try:
         while pending or procs:
@@ -466,14 +521,18 @@ def _run_batches_in_subprocesses(outdir: Path, batches: list[int], jobs: int, ba
 
 
 def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: bool = False,
-                  in_flight: int = POVRAY_IN_FLIGHT) -> Path:
+                  in_flight: int = POVRAY_IN_FLIGHT, workers: Workers | None = None) -> Path:
     """Render everything a converted folder needs, in parallel, and composite.
 
     Mesh plans: ``jobs`` batch workers at once (default one per core), each with up
-    to ``in_flight`` POV-Ray processes (:func:`render_samples`)."""
+    to ``in_flight`` POV-Ray processes (:func:`render_samples`); ``workers`` are
+    batch workers started earlier (:class:`Workers`), used or stopped here."""
     outdir = Path(outdir)
     plan = read_plan(outdir)
     method = plan["inputs"]["method"]
+    if method != "mesh" or jobs == 1:
+        if workers is not None:
+            workers.close()
     if method != "mesh":
         render_view(outdir, method)
         return outdir / "image.exr"
@@ -490,6 +549,9 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
                 for b in todo:
                     bar.update(len(render_batch(outdir, b, in_flight=in_flight)))
             else:
-                _run_batches_in_subprocesses(outdir, todo, jobs, bar, samples, in_flight)
+                _run_batches_in_subprocesses(outdir, todo, jobs, bar, samples, in_flight,
+                                             workers)
+    if workers is not None:
+        workers.close()     # nothing (left) to render for those still waiting
     composite_outdir(outdir)
     return outdir / "image.exr"

@@ -240,3 +240,24 @@ def test_more_samples_reuse_the_rendered_ones(tmp_path):
     # a change that alters every sample (the seed) drops them all
     convert(opts(tmp_path, samples=5, batch_size=5, seed=3))
     assert not list(s.glob("sample_*.exr")) and not (out / "exposure.txt").exists()
+
+
+def test_workers_started_before_the_plan_render_the_same_image(tmp_path):
+    from povlens.render import Workers
+    ref = tmp_path / "ref"
+    convert(opts(tmp_path, outdir=str(ref), samples=4, batch_size=2))
+    render_outdir(ref, jobs=2, quiet=True)
+    pre = tmp_path / "pre"
+    with Workers(pre, 3) as w:                    # one more worker than batches
+        convert(opts(tmp_path, outdir=str(pre), samples=4, batch_size=2))
+        render_outdir(pre, jobs=2, quiet=True, workers=w)
+    np.testing.assert_array_equal(read_image(pre / "image.exr"), read_image(ref / "image.exr"))
+    assert all(p.poll() is not None for p in w.procs.values())
+    # a plan that is not a mesh render: the waiting workers are stopped
+    view = tmp_path / "view"
+    with Workers(view, 2) as w:
+        procs = list(w.procs.values())
+        convert(opts(tmp_path, outdir=str(view), method="pinhole", samples=1))
+        render_outdir(view, jobs=2, quiet=True, workers=w)
+    assert all(p.poll() == 0 for p in procs)
+    assert (view / "image.exr").exists() and not (view / "samples").exists()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import os
 
@@ -127,13 +128,18 @@ def run_convert(args) -> int:
 
 
 def run_render(args) -> int:
-    from ..render import render_outdir
-    # render: a focal_blur render --method auto is likely to choose starts while the
-    # depth probe runs (convert and plan only decide)
-    plan = convert(dataclasses.replace(options_from_args(args), speculate=True))
-    if not args.quiet:
-        print(_summary(plan))
-    out = render_outdir(args.outdir, jobs=args.jobs, quiet=args.quiet)
+    from ..render import Workers, render_outdir
+    opts = options_from_args(args)
+    jobs = args.jobs or os.cpu_count() or 1
+    # Mesh render workers start (Python and libraries, ~0.5 s) while the folder is
+    # converted; a focal_blur render --method auto is likely to choose starts while
+    # its depth probe runs (convert and plan alone only decide).
+    with (Workers(opts.outdir, jobs) if opts.method in ("mesh", "auto") and jobs > 1
+          else contextlib.nullcontext()) as workers:
+        plan = convert(dataclasses.replace(opts, speculate=True))
+        if not args.quiet:
+            print(_summary(plan))
+        out = render_outdir(args.outdir, jobs=jobs, quiet=args.quiet, workers=workers)
     if not args.quiet:
         print(f"wrote {out} and {out.with_suffix('.png')}")
     return 0
@@ -152,6 +158,17 @@ def run_batch(args) -> int:
     # Terminated (an interrupted 'povlens render', or make): unwind, so the batch
     # stops the POV-Ray processes it started and removes their partial files.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
+    if args.wait:
+        # started before the plan exists ('povlens render' spawns its workers while it
+        # converts): import everything now, then wait for "go" (anything else: stop)
+        import importlib
+        for mod in ("pupil", "sampling", "lens_camera", "mesh_camera"):
+            importlib.import_module(f"povlens.{mod}")
+        if sys.stdin.readline().strip() != "go":
+            return 0
+        from ..convert import read_plan
+        if args.batch >= len(read_plan(args.outdir).get("batches", [])):
+            return 0
     render_batch(args.outdir, args.batch, in_flight=args.in_flight)
     return 0
 
@@ -191,6 +208,10 @@ def register(sub) -> None:
     p = sub.add_parser("render-batch", help="render one batch of lens samples (used by make)")
     p.add_argument("outdir", metavar="OUTDIR")
     p.add_argument("batch", type=int, metavar="BATCH")
+    p.add_argument("--wait", action="store_true",
+                   help="import, then wait for a line 'go' on standard input before reading "
+                        "the plan (used by 'povlens render'; exit 0 on anything else or if "
+                        "the plan has no such batch)")
     p.add_argument("--in-flight", type=int, default=4, metavar="N",
                    help="POV-Ray processes running at once (default 4: each spends most of "
                         "its ~0.6 s start-up idle, so several overlap on one core)")
