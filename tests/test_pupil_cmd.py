@@ -88,9 +88,9 @@ def test_bad_options_give_a_clear_message(capsys, args, needle):
     if args[0].startswith("--focus"):
         base = ["dgauss.50mm"]
     try:
-        code, out, err = run(capsys, *base, *args, "--no-compare")
+        code, _, err = run(capsys, *base, *args, "--no-compare")
     except SystemExit as e:  # argparse's own checks
-        code, (out, err) = e.code, capsys.readouterr()
+        code, (_, err) = e.code, capsys.readouterr()
     assert code == 2
     assert needle in err and "Traceback" not in err
 

@@ -1,5 +1,3 @@
-import math
-
 import numpy as np
 import pytest
 
@@ -38,7 +36,6 @@ def test_thin_lens_fit_of_dgauss():
     film = Film.from_diagonal(35.0, 160, 120)
     f = thick_lens_film_distance_mm(lens, 10000.0)
     m = fit_thin_lens(lens, f, 10000.0, film)
-    p = paraxial_data(lens)
     # entrance pupil 48.4554 mm in front of the film when focused at 10 m (§9.3)
     assert m.centre_z_mm == pytest.approx(48.4554, abs=1e-3)
     assert m.pupil_diameter_mm == pytest.approx(24.8051, abs=1e-4)
