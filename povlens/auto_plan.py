@@ -40,7 +40,7 @@ The choice is made from measurements, not guesses:
    stopping when POV-Ray's confidence test passes), which needs no
    depth-dependent count, so ``povlens render`` can start it while the probe
    runs (:func:`povlens.convert.convert`, ``speculate``).
-4. **Adaptive mesh sampling** (on by default with auto) — :func:`adaptive_rows`:
+4. **Adaptive mesh sampling** (``--adaptive``, off by default) — :func:`adaptive_rows`:
    per band of 8 rows the same rule from the probe's blur (floor 8), and
    :func:`sample_row_ranges`: sample k renders only the rows of the bands that
    need more than k samples (+SR/+ER); the composite divides each pixel by its own

@@ -69,7 +69,7 @@ class AutoBenchSettings:
     width: int = 160
     height: int = 120
     tolerance_px: float = 0.5
-    adaptive: bool = True                   # what --method auto does by default
+    adaptive: bool = False                  # --adaptive (off by default)
     jobs: int = 0                           # 0 = one per core
     out: str = str(ROOT / "benchmarks" / "results")
     name: str = "auto"
@@ -138,10 +138,16 @@ def _render(opts: ConvertOptions, jobs: int, repeats: int = 1) -> tuple[float, n
         shutil.rmtree(opts.outdir, ignore_errors=True)
         t0 = time.perf_counter()
         # exactly what 'povlens render' does (povlens/cli/render_cmd.py)
-        with (Workers(opts.outdir, jobs) if opts.method in ("mesh", "auto") and jobs > 1
-              else contextlib.nullcontext()) as workers:
-            plan = convert(dataclasses.replace(opts, speculate=True))
-            render_outdir(opts.outdir, jobs=jobs, quiet=True, workers=workers)
+        with contextlib.ExitStack() as stack:
+            workers = []
+
+            def start_workers():
+                if jobs > 1:
+                    workers.append(stack.enter_context(Workers(opts.outdir, jobs)))
+
+            plan = convert(dataclasses.replace(opts, speculate=True), on_mesh=start_workers)
+            render_outdir(opts.outdir, jobs=jobs, quiet=True,
+                          workers=workers[0] if workers else None)
         best = min(best, time.perf_counter() - t0)
     return best, read_image(Path(opts.outdir) / "image.exr")[..., :3], plan
 

@@ -343,10 +343,25 @@ def _scene_include(plan: dict, outdir: Path) -> str:
     return os.path.relpath(plan["inputs"]["scene"], outdir)
 
 
-def convert(opts: ConvertOptions) -> dict:
-    """Write OUTDIR (plan.json, wrappers, Makefile) and return the plan."""
+def convert(opts: ConvertOptions, on_mesh=None) -> dict:
+    """Write OUTDIR (plan.json, wrappers, Makefile) and return the plan.
+
+    ``on_mesh``: called (once, no arguments) as soon as it is known that the plan
+    will be a mesh render (at once for ``--method mesh``; for ``auto`` when the lens
+    alone rules out the others, else after the decision): ``povlens render`` starts
+    its render workers then, so their start-up overlaps the rest of the conversion.
+    """
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
+    called = []
+
+    def mesh_known():
+        if on_mesh is not None and not called:
+            called.append(True)
+            on_mesh()
+
+    if opts.method == "mesh":
+        mesh_known()
     decision = None
     requested = opts
     reuse = None
@@ -367,6 +382,8 @@ def convert(opts: ConvertOptions) -> dict:
             plan0, lens, model, film, table = _finish_plan(base, start, version=version)
             if opts.speculate and opts.auto_samples:
                 speculative = _start_speculative_focal_blur(opts, plan0)
+            if _lens_rules_out_views(opts, plan0):
+                mesh_known()
             decision = choose_method(base, plan0, model, lens, film, probe=probe,
                                      pupil_table=table)
         except BaseException:
@@ -388,6 +405,8 @@ def convert(opts: ConvertOptions) -> dict:
             decision["reasons"].append(f"--samples {opts.samples} given: it replaces the "
                                        f"decision's {decision['samples']}")
         opts = dataclasses.replace(opts, method=decision["method"], samples=samples)
+        if opts.method == "mesh":
+            mesh_known()
     adaptive = None
     if opts.adaptive and opts.method == "mesh":
         adaptive = decision.pop("adaptive", None) if decision is not None else None
@@ -462,18 +481,25 @@ def _focal_blur_text(plan: dict, out: Path) -> str:
         aperture=cam["aperture"], focal_distance=cam["focal_distance"], **_blur_settings(plan))
 
 
+def _lens_rules_out_views(opts: ConvertOptions, plan0: dict) -> bool:
+    """True when the lens alone makes --method auto choose mesh: vignetting that is
+    wanted (focal_blur and pinhole have none; it does not depend on depth) or
+    distortion over the budget at the plan's standard depths."""
+    from .auto_plan import VIGNETTING_TOLERANCE
+    e = plan0["model_error"]
+    return bool((opts.vignetting and e["min_relative_illumination"]
+                 < 1.0 - VIGNETTING_TOLERANCE) or e["max_distortion_px"] >= opts.tolerance_px)
+
+
 def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict):
     """Start the focal_blur render --method auto would choose, unless the lens alone
     rules it out (vignetting that is wanted, distortion over the budget).  Its
     settings (:data:`povlens.auto_plan.FOCAL_BLUR_ADAPTIVE`) do not depend on the
     depth probe, so it runs while the probe does; :func:`convert` keeps it if the
     decision is focal-blur, else stops it.  Returns the RenderJob or None."""
-    from .auto_plan import FOCAL_BLUR_ADAPTIVE, VIGNETTING_TOLERANCE
+    from .auto_plan import FOCAL_BLUR_ADAPTIVE
     from .povray import start_render
-    e = plan0["model_error"]
-    if opts.vignetting and e["min_relative_illumination"] < 1.0 - VIGNETTING_TOLERANCE:
-        return None
-    if e["max_distortion_px"] >= opts.tolerance_px:
+    if _lens_rules_out_views(opts, plan0):
         return None
     out = Path(opts.outdir)
     guess = dict(plan0, inputs=dict(plan0["inputs"], auto_samples=True),

@@ -70,8 +70,9 @@ def _add_convert_arguments(p) -> None:
     p.add_argument("--adaptive", action=argparse.BooleanOptionalAction, default=None,
                    help="mesh renders: from a depth probe, give sharp row bands fewer lens "
                         "samples than bands deep in blur (later samples render only the "
-                        "blurred rows, POV-Ray +SR/+ER); default: on with --method auto "
-                        "(its probe is there anyway), off otherwise")
+                        "blurred rows, POV-Ray +SR/+ER); default off: each partial sample "
+                        "still costs a POV-Ray run and a full mesh, so on the bundled scenes "
+                        "it saved no time at equal error")
     p.add_argument("-o", "--outdir", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
 
@@ -94,7 +95,7 @@ def options_from_args(args) -> ConvertOptions:
         real_focus=not args.thick_lens_focus, vignetting=not args.no_vignetting,
         jitter=not args.no_jitter, tolerance_px=args.tolerance,
         auto_samples=args.samples is None,
-        adaptive=(args.method == "auto") if args.adaptive is None else args.adaptive)
+        adaptive=bool(args.adaptive))
 
 
 def _summary(plan: dict) -> str:
@@ -134,12 +135,18 @@ def run_render(args) -> int:
     # Mesh render workers start (Python and libraries, ~0.5 s) while the folder is
     # converted; a focal_blur render --method auto is likely to choose starts while
     # its depth probe runs (convert and plan alone only decide).
-    with (Workers(opts.outdir, jobs) if opts.method in ("mesh", "auto") and jobs > 1
-          else contextlib.nullcontext()) as workers:
-        plan = convert(dataclasses.replace(opts, speculate=True))
+    with contextlib.ExitStack() as stack:
+        workers = []
+
+        def start_workers():
+            if jobs > 1:
+                workers.append(stack.enter_context(Workers(opts.outdir, jobs)))
+
+        plan = convert(dataclasses.replace(opts, speculate=True), on_mesh=start_workers)
         if not args.quiet:
             print(_summary(plan))
-        out = render_outdir(args.outdir, jobs=jobs, quiet=args.quiet, workers=workers)
+        out = render_outdir(args.outdir, jobs=jobs, quiet=args.quiet,
+                            workers=workers[0] if workers else None)
     if not args.quiet:
         print(f"wrote {out} and {out.with_suffix('.png')}")
     return 0
