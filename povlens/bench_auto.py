@@ -260,7 +260,7 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
              "rmse corrected for the reference's own noise (column 'rmse' of the reference "
              "rows)",
              "",
-             f"{'scene':<7}{'lens':<17}{'auto chose':<16}{'auto s':>8}{'auto rmse':>11}"
+             f"{'scene':<7}{'lens':<20}{'auto chose':<16}{'auto s':>8}{'auto rmse':>11}"
              f"{'budget':>9}{'pinhole s':>11}{'f-blur s':>10}{'mesh s':>9}{'best':>12}"
              f"{'auto/best':>11}"]
     verdicts = []
@@ -279,7 +279,7 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
 
         def f(x):
             return f"{x:.2f}" if math.isfinite(x) else "never"
-        lines.append(f"{scene:<7}{lens:<17}{auto.chosen + ' ' + str(auto.samples):<16}"
+        lines.append(f"{scene:<7}{lens:<20}{auto.chosen + ' ' + str(auto.samples):<16}"
                      f"{auto.seconds:>8.2f}{auto.rmse:>11.5f}{info['budget']:>9.5f}"
                      f"{f(fixed.get('pinhole', math.inf)):>11}"
                      f"{f(fixed.get('focal-blur', math.inf)):>10}"
@@ -318,8 +318,8 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
                          f"{a.get('uniform_pixel_samples')}")
     lines.append("")
     lines.append("all runs:")
-    lines.append(f"{'scene':<7}{'lens':<17}{'method':<12}{'N':>5}{'seconds':>9}{'rmse':>10}")
+    lines.append(f"{'scene':<7}{'lens':<20}{'method':<12}{'N':>5}{'seconds':>9}{'rmse':>10}")
     for r in rows:
-        lines.append(f"{r.scene:<7}{r.lens:<17}{r.method:<12}{r.samples:>5}{r.seconds:>9.2f}"
+        lines.append(f"{r.scene:<7}{r.lens:<20}{r.method:<12}{r.samples:>5}{r.seconds:>9.2f}"
                      f"{r.rmse:>10.5f}" + (f"  -> {r.chosen}" if r.chosen else ""))
     return "\n".join(lines)
