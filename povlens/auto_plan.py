@@ -66,11 +66,12 @@ MIN_SAMPLES, MAX_SAMPLES = 8, 256
 #: focal_blur settings of --method auto: POV-Ray's adaptive sampling (at least
 #: ``min`` samples per pixel, more until the confidence / variance test passes, at
 #: most ``max``).  Sharp pixels stop at the minimum, so no depth-dependent count is
-#: needed and the render can start while the depth probe runs.  Measured on
-#: paper.pov / telephoto.250mm, 160x120, against a 128-sample mesh reference:
-#: ``8, 256`` with these settings 0.66 s / RMSE 0.0111, fixed ``176, 176`` 1.33 s /
-#: 0.0110, fixed ``64, 64`` 0.82 s / 0.0138.
-FOCAL_BLUR_ADAPTIVE = {"min": 8, "max": 256, "confidence": 0.95, "variance": 1.0 / 1000}
+#: needed and the render can start while the depth probe runs.  Measured with
+#: ``povlens bench --auto`` (160x120, 256-sample mesh reference, noise-corrected
+#: RMSE; benchmarks/results/auto*.txt): on paper.pov / telephoto.250mm ``8, 256``
+#: with confidence 0.95, variance 1/1000 gave 0.79 s / 0.0093, over the 0.0072
+#: budget; these settings 1.30 s / 0.0065 (fixed ``256, 256``: 1.91 s / 0.0064).
+FOCAL_BLUR_ADAPTIVE = {"min": 16, "max": 256, "confidence": 0.99, "variance": 1.0 / 10000}
 #: Relative illumination below 1 - this counts as vignetting focal_blur cannot render.
 VIGNETTING_TOLERANCE = 0.05
 #: Probe image width (pixels) and percentiles for near / far.
