@@ -33,7 +33,6 @@ its RMSE is at most that.  The reference's own noise adds to every RMSE.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import math
@@ -46,9 +45,9 @@ from pathlib import Path
 import numpy as np
 
 from .bench import ROOT, rmse
-from .convert import ConvertOptions, convert
+from .convert import ConvertOptions
 from .images import read_image
-from .render import Workers, render_outdir
+from .render import convert_and_render
 
 __all__ = ["AutoBenchSettings", "AutoRow", "run_auto_bench", "shift_rmse", "corrected_rmse",
            "time_at_error", "SCENE_FOCUS"]
@@ -137,17 +136,7 @@ def _render(opts: ConvertOptions, jobs: int, repeats: int = 1) -> tuple[float, n
     for _ in range(max(1, repeats)):
         shutil.rmtree(opts.outdir, ignore_errors=True)
         t0 = time.perf_counter()
-        # exactly what 'povlens render' does (povlens/cli/render_cmd.py)
-        with contextlib.ExitStack() as stack:
-            workers = []
-
-            def start_workers():
-                if jobs > 1:
-                    workers.append(stack.enter_context(Workers(opts.outdir, jobs)))
-
-            plan = convert(dataclasses.replace(opts, speculate=True), on_mesh=start_workers)
-            render_outdir(opts.outdir, jobs=jobs, quiet=True,
-                          workers=workers[0] if workers else None)
+        plan, _ = convert_and_render(opts, jobs=jobs, quiet=True)   # = povlens render
         best = min(best, time.perf_counter() - t0)
     return best, read_image(Path(opts.outdir) / "image.exr")[..., :3], plan
 

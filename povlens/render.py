@@ -49,7 +49,7 @@ from .paraxial import stopped_down
 from .povray import find_povray, output_written, render as povray_render
 from .prescription import read_lens
 
-__all__ = ["Workers", "render_samples", "render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
+__all__ = ["convert_and_render", "Workers", "render_samples", "render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
            "lens_for"]
 
 
@@ -555,3 +555,32 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
         workers.close()     # nothing (left) to render for those still waiting
     composite_outdir(outdir)
     return outdir / "image.exr"
+
+
+def convert_and_render(opts, jobs: int | None = None, quiet: bool = False,
+                       on_plan=None) -> tuple[dict, Path]:
+    """What ``povlens render`` does: convert ``opts`` (a
+    :class:`povlens.convert.ConvertOptions`) and render the folder.
+
+    Mesh render workers start (Python and its libraries, ~0.5 s) as soon as the plan
+    is known to be a mesh render, so their start-up overlaps the rest of the
+    conversion; a focal_blur render --method auto is likely to choose starts while
+    its depth probe runs (``speculate``).  ``on_plan(plan)`` is called between
+    conversion and rendering.  Returns (plan, path of image.exr)."""
+    import contextlib
+    import dataclasses
+    from .convert import convert
+    jobs = jobs or os.cpu_count() or 1
+    with contextlib.ExitStack() as stack:
+        workers = []
+
+        def start_workers():
+            if jobs > 1:
+                workers.append(stack.enter_context(Workers(opts.outdir, jobs)))
+
+        plan = convert(dataclasses.replace(opts, speculate=True), on_mesh=start_workers)
+        if on_plan is not None:
+            on_plan(plan)
+        out = render_outdir(opts.outdir, jobs=jobs, quiet=quiet,
+                            workers=workers[0] if workers else None)
+    return plan, out

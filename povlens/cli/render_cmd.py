@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
-import dataclasses
 import os
 
 from ..convert import METHODS, ConvertOptions, convert
@@ -129,24 +127,10 @@ def run_convert(args) -> int:
 
 
 def run_render(args) -> int:
-    from ..render import Workers, render_outdir
-    opts = options_from_args(args)
-    jobs = args.jobs or os.cpu_count() or 1
-    # Mesh render workers start (Python and libraries, ~0.5 s) while the folder is
-    # converted; a focal_blur render --method auto is likely to choose starts while
-    # its depth probe runs (convert and plan alone only decide).
-    with contextlib.ExitStack() as stack:
-        workers = []
-
-        def start_workers():
-            if jobs > 1:
-                workers.append(stack.enter_context(Workers(opts.outdir, jobs)))
-
-        plan = convert(dataclasses.replace(opts, speculate=True), on_mesh=start_workers)
-        if not args.quiet:
-            print(_summary(plan))
-        out = render_outdir(args.outdir, jobs=jobs, quiet=args.quiet,
-                            workers=workers[0] if workers else None)
+    from ..render import convert_and_render
+    _, out = convert_and_render(options_from_args(args), jobs=args.jobs, quiet=args.quiet,
+                                on_plan=None if args.quiet else
+                                (lambda plan: print(_summary(plan))))
     if not args.quiet:
         print(f"wrote {out} and {out.with_suffix('.png')}")
     return 0
