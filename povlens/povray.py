@@ -391,10 +391,15 @@ def output_written(pid: int, path: Path) -> bool:
     POV-Ray 3.7 writes its image in one go at the end of the render and then
     spends ~0.3 s idle before it exits (measured: a 64x48 image appears 0.33 s
     after the start, the process exits at 0.64-0.68 s).  The image is final once
-    closed, so the caller need not wait for the exit.  A process with children
-    (a wrapper script in POVLENS_POVRAY) is never judged early: False until it exits.
+    closed, so the caller need not wait for the exit.  Only a process running a
+    POV-Ray executable is judged early: a wrapper script in POVLENS_POVRAY (its
+    executable is the shell) may still have work to do after its POV-Ray child
+    exits, so it gives False until it exits.  A process with children is never
+    judged early either.
     """
     try:
+        if "povray" not in os.path.basename(os.readlink(f"/proc/{pid}/exe")):
+            return False
         if Path(path).stat().st_size == 0:
             return False
         for task in os.listdir(f"/proc/{pid}/task"):

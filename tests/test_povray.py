@@ -166,3 +166,31 @@ def test_image_is_taken_when_written_not_at_process_exit(tmp_path):
     full = povray.render(scene, tmp_path / "b.exr", 64, 48)
     np.testing.assert_array_equal(early, read_image(full))
     assert not povray.output_written(proc.pid, tmp_path / "missing.exr")
+
+
+def test_a_wrapper_script_is_never_judged_done_before_it_exits(tmp_path):
+    """A POVLENS_POVRAY wrapper may work on after its POV-Ray child exits (the
+    window between the child's exit and its own): never picked up early then."""
+    import subprocess
+    import time
+    scene = tmp_path / "s.pov"
+    scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
+    out = tmp_path / "a.exr"
+    wrapper = tmp_path / "wrap"
+    wrapper.write_text(f'#!/bin/sh\n"{povray.find_povray()}" "$@"\n'
+                       # shell builtins only: no child process while it works on
+                       'i=0; while [ $i -lt 100000 ]; do i=$((i+1)); done\n'
+                       f'echo done > "{tmp_path}/marker"\n')
+    wrapper.chmod(0o755)
+    proc = subprocess.Popen([str(wrapper), "-D", "-V", "-GR", "-GS", f"+I{scene}", f"+O{out}",
+                             "+FE", "+W16", "+H12", "-A"], cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    judged_early = False
+    while proc.poll() is None:
+        if out.exists() and povray.output_written(proc.pid, out):
+            judged_early = proc.poll() is None
+            break
+        time.sleep(0.005)
+    proc.wait()
+    assert not judged_early
+    assert (tmp_path / "marker").exists()
