@@ -6,9 +6,10 @@
 One run measures, on the same scene and size:
 * the pinhole render (one POV-Ray pass: the trace cost of one sample plus start-up);
 * focal_blur with ``blur_samples N, N`` (the equivalent thin lens);
-* the mesh path with 1, 2, 4 and 8 POV-Ray processes in flight per batch worker
-  (one worker per core; every lens sample is its own POV-Ray process), with its
-  parts: exit-pupil table, rays and mesh files (Python), POV-Ray, composite;
+* the mesh path (``render_outdir``: one process traces the lens samples and writes
+  their meshes; every sample is its own POV-Ray process) with 2, 4, 8 and 16
+  POV-Ray processes in flight, with its parts: exit-pupil table, rays and mesh
+  files (Python), POV-Ray, composite;
 and prints the ratios.  Results go to stdout; redirect to benchmarks/results/.
 """
 
@@ -43,7 +44,7 @@ def main(argv=None):
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--width", type=int, default=160)
     ap.add_argument("--height", type=int, default=120)
-    ap.add_argument("--in-flight", default="1,2,4,8")
+    ap.add_argument("--in-flight", default="2,4,8,16")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     args = ap.parse_args(argv)
     base = dict(scene=args.scene, lens=args.lens, focus=args.focus, width=args.width,
@@ -72,13 +73,13 @@ def main(argv=None):
             total = t_conv + t_table + t_render
             rows.append((bs, total))
             print(f"mesh, {bs:2d} POV-Ray in flight: total {total:7.2f} s = convert {t_conv:.2f} "
-                  f"+ pupil table {t_table:.2f} + render {t_render:.2f} (of which, summed over "
-                  f"batches: rays+meshes {rays:.2f}, POV-Ray processes {pov:.2f}; composite "
+                  f"+ pupil table {t_table:.2f} + render {t_render:.2f} (of which "
+                  f"rays+meshes {rays:.2f}, POV-Ray processes {pov:.2f} summed; composite "
                   f"{t_comp:.2f}); "
                   f"{total / t_fb:.1f}x focal_blur, {total / (args.samples * t_pin):.2f}x "
                   f"N pinhole passes")
         best = min(rows, key=lambda r: r[1])
-        print(f"best mesh setting: {best[0]} POV-Ray processes in flight per worker, "
+        print(f"best mesh setting: {best[0]} POV-Ray processes in flight, "
               f"{best[1]:.2f} s = "
               f"{best[1] / t_fb:.1f}x focal_blur with the same N")
     finally:

@@ -8,10 +8,10 @@
   and the render method with its sample batches;
 * ``pinhole.pov`` and ``focal_blur.pov`` — wrappers that ``#include`` the scene
   and declare their own camera last (POV-Ray uses the last camera);
-* for the mesh method, ``samples/batch_NNN.pov`` wrappers that render lens
-  samples as animation frames (one mesh per frame, so per-sample weights stay
-  exact while the ~0.6 s POV-Ray start-up is paid once per batch) and
-  ``pupil.npz``, the exit-pupil table;
+* for the mesh method, ``samples/batch_NNN.pov`` wrappers that render one lens
+  sample each per POV-Ray run (the sample's ray mesh is written by the render
+  worker of batch NNN, :mod:`povlens.render`) and ``pupil.npz``, the exit-pupil
+  table;
 * ``Makefile`` — ``make -C OUTDIR -j2`` renders and composites; a second
   ``make`` does nothing.
 
@@ -247,10 +247,13 @@ def _finish_plan(opts: ConvertOptions, st: _PlanStart, *, pupil_table=None, mode
 
     version = version()
     rw, rh, drop = render_size(film.width_px, film.height_px, version)
-    # Each POV-Ray process renders a batch of samples as animation frames: start-up
-    # (~0.6 s) is paid once per batch.  By default, one batch per core.
+    # A batch is the work of one render worker (each of its samples is its own
+    # POV-Ray process).  By default, one batch per core.  Samples are dealt
+    # round-robin, so the samples a plan with fewer samples rendered first
+    # (0..n-1: the same for any count) are spread evenly over the batches.
     bs = opts.batch_size or math.ceil(opts.samples / (os.cpu_count() or 1))
-    batches = [list(range(b, min(b + bs, opts.samples))) for b in range(0, opts.samples, bs)]
+    nb = math.ceil(opts.samples / bs)
+    batches = [list(range(b, opts.samples, nb)) for b in range(nb)]
     return {
         "povlens_plan": PLAN_VERSION,
         "inputs": {
@@ -343,28 +346,29 @@ def _scene_include(plan: dict, outdir: Path) -> str:
     return os.path.relpath(plan["inputs"]["scene"], outdir)
 
 
-def convert(opts: ConvertOptions, on_mesh=None) -> dict:
+def convert(opts: ConvertOptions, render_early=None) -> dict:
     """Write OUTDIR (plan.json, wrappers, Makefile) and return the plan.
 
-    ``on_mesh``: called (once, no arguments) as soon as it is known that the plan
-    will be a mesh render (at once for ``--method mesh``; for ``auto`` when the lens
-    alone rules out the others, else after the decision): ``povlens render`` starts
-    its render workers then, so their start-up overlaps the rest of the conversion.
+    ``render_early``: with ``speculate``, ``auto`` and a lens that alone rules out
+    the pinhole and focal_blur views (:func:`_lens_rules_out_views`), the render is
+    a mesh render of at least :data:`povlens.auto_plan.MIN_SAMPLES` samples (the
+    given ``--samples`` without the automatic count).  Lens sample k does not
+    depend on the count, so those samples can be rendered while the depth probe
+    runs: a provisional plan with that many samples is written to OUTDIR and
+    ``render_early(plan, lens, table)`` is called (the stopped-down lens and its
+    exit-pupil table); it returns a handle with ``wait()`` (raises
+    what the render raised) and ``cancel()``.  After the decision the handle is
+    waited for (mesh: the final plan keeps the rendered samples) or cancelled
+    (another method; not expected, since the lens alone ruled the views out),
+    before the final plan is written.
     """
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
-    called = []
 
-    def mesh_known():
-        if on_mesh is not None and not called:
-            called.append(True)
-            on_mesh()
-
-    if opts.method == "mesh":
-        mesh_known()
     decision = None
     requested = opts
     reuse = None
+    early = None
     if opts.method == "auto":
         from .auto_plan import choose_method, start_depth_probe
         if not (opts.tolerance_px > 0 and math.isfinite(opts.tolerance_px)):
@@ -380,33 +384,45 @@ def convert(opts: ConvertOptions, on_mesh=None) -> dict:
         try:
             version = _in_background(povray_version)
             plan0, lens, model, film, table = _finish_plan(base, start, version=version)
+            # The plan of the chosen method differs from plan0 only in the method, the
+            # samples and the batches: same table, same model error.
+            reuse = {"pupil_table": table, "model_error": plan0["model_error"],
+                     "version": lambda: plan0["povray"]["version"]}
             if opts.speculate and opts.auto_samples:
                 speculative = _start_speculative_focal_blur(opts, plan0)
-            if _lens_rules_out_views(opts, plan0):
-                mesh_known()
+            if (opts.speculate and render_early is not None and not opts.adaptive
+                    and _lens_rules_out_views(opts, plan0)):
+                early = _render_early(opts, start, reuse, lens, table, render_early)
             decision = choose_method(base, plan0, model, lens, film, probe=probe,
                                      pupil_table=table)
+            if early is not None:
+                early_n = early[0]["inputs"]["samples"]
+                if decision["method"] == "mesh":
+                    early[1].wait()
+                    decision["reasons"].append(
+                        f"(lens samples 0..{early_n - 1} were rendered while the depth probe "
+                        f"ran: the lens alone ruled out the views)")
+                else:
+                    early[1].cancel()
+                    decision["reasons"].append("(the mesh render started while the probe ran "
+                                               "was stopped)")
         except BaseException:
             probe.cancel()
             if speculative is not None:
                 speculative.cancel()
+            if early is not None:
+                early[1].cancel()
             raise
         if speculative is not None and decision["method"] != "focal-blur":
             speculative.cancel()
             decision["reasons"].append("(the focal_blur render started while the probe ran "
                                        "was stopped)")
             speculative = None
-        # The plan of the chosen method differs from plan0 only in the method, the
-        # samples and the batches: same table, same model error.
-        reuse = {"pupil_table": table, "model_error": plan0["model_error"],
-                 "version": lambda: plan0["povray"]["version"]}
         samples = decision["samples"] if opts.auto_samples else opts.samples
         if not opts.auto_samples:
             decision["reasons"].append(f"--samples {opts.samples} given: it replaces the "
                                        f"decision's {decision['samples']}")
         opts = dataclasses.replace(opts, method=decision["method"], samples=samples)
-        if opts.method == "mesh":
-            mesh_known()
     adaptive = None
     if opts.adaptive and opts.method == "mesh":
         adaptive = decision.pop("adaptive", None) if decision is not None else None
@@ -427,12 +443,32 @@ def convert(opts: ConvertOptions, on_mesh=None) -> dict:
     if adaptive is not None:
         _adaptive_batches(plan, adaptive, opts)
     if decision is not None:
-        # inputs.method is the method rendered (render, Makefile and report read it);
-        # requested_method records that it was chosen automatically.
-        plan["inputs"]["requested_method"] = "auto"
-        plan["inputs"]["tolerance_px"] = requested.tolerance_px
-        plan["inputs"]["auto_samples"] = requested.auto_samples
-        plan["decision"] = decision
+        _mark_auto(plan, requested, decision)
+    _write_folder(out, plan)
+    if decision is not None and speculative is not None:
+        # the decision is the render already running: it becomes the folder's view
+        try:
+            speculative.wait()
+        except BaseException:
+            Path(speculative.out_path).unlink(missing_ok=True)
+            raise
+        os.replace(speculative.out_path, out / "view-focal-blur.exr")
+    return plan
+
+
+def _mark_auto(plan: dict, requested: ConvertOptions, decision: dict) -> None:
+    """Record in a plan that --method auto chose it.  inputs.method is the method
+    rendered (render, Makefile and report read it); requested_method records that
+    it was chosen automatically."""
+    plan["inputs"]["requested_method"] = "auto"
+    plan["inputs"]["tolerance_px"] = requested.tolerance_px
+    plan["inputs"]["auto_samples"] = requested.auto_samples
+    plan["decision"] = decision
+
+
+def _write_folder(out: Path, plan: dict) -> None:
+    """Write a plan's files into OUTDIR: plan.json, the wrappers, the Makefile.  What
+    an earlier plan rendered that this one cannot use is removed first."""
     old = None
     if (out / "plan.json").exists():
         try:
@@ -446,21 +482,29 @@ def convert(opts: ConvertOptions, on_mesh=None) -> dict:
     _write_if_changed(out / "pinhole.pov", pinhole_wrapper(
         scene_inc, cam["location"], cam["direction"], cam["right"], cam["up"]))
     _write_if_changed(out / "focal_blur.pov", _focal_blur_text(plan, out))
-    if opts.method == "mesh":
+    if plan["inputs"]["method"] == "mesh":
         (out / "samples").mkdir(exist_ok=True)
         for b, _ in enumerate(plan["batches"]):
             _write_if_changed(out / "samples" / f"batch_{b:03d}.pov", _batch_wrapper(plan, out, b))
     _write_if_changed(out / "Makefile", _makefile(plan))
     _write_json(out / "plan.json", _sanitize(plan))
-    if decision is not None and speculative is not None:
-        # the decision is the render already running: it becomes the folder's view
-        try:
-            speculative.wait()
-        except BaseException:
-            Path(speculative.out_path).unlink(missing_ok=True)
-            raise
-        os.replace(speculative.out_path, out / "view-focal-blur.exr")
-    return plan
+
+
+def _render_early(opts: ConvertOptions, start: "_PlanStart", reuse: dict, lens, table,
+                  render_early):
+    """Write the provisional mesh plan of an auto conversion whose lens rules out
+    the views, and start rendering it (:func:`convert`, ``render_early``).
+    Returns (provisional plan, handle)."""
+    from .auto_plan import MIN_SAMPLES
+    n = MIN_SAMPLES if opts.auto_samples else opts.samples
+    eopts = dataclasses.replace(opts, method="mesh", samples=n)
+    plan = _finish_plan(eopts, start, **reuse)[0]
+    _mark_auto(plan, opts, {
+        "method": "mesh", "samples": n, "provisional": True,
+        "reasons": ["provisional: the lens alone rules out the pinhole and focal_blur views "
+                    "(vignetting or distortion); the depth probe decides the sample count"]})
+    _write_folder(Path(opts.outdir), plan)
+    return plan, render_early(plan, lens, table)
 
 
 def _blur_settings(plan: dict) -> dict:

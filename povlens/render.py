@@ -49,7 +49,7 @@ from .paraxial import stopped_down
 from .povray import find_povray, output_written, render as povray_render
 from .prescription import read_lens
 
-__all__ = ["convert_and_render", "Workers", "render_samples", "render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
+__all__ = ["convert_and_render", "render_samples", "render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
            "lens_for"]
 
 
@@ -201,8 +201,10 @@ class _SampleRenders:
     file there, so a chatty scene cannot fill a pipe) and is renamed to
     ``sample_KKKK.exr`` when POV-Ray succeeds; its mesh is deleted then."""
 
-    def __init__(self, plan: dict, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT):
+    def __init__(self, plan: dict, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT,
+                 on_done=None):
         self.plan, self.outdir, self.batch = plan, Path(outdir), batch
+        self.on_done = on_done
         self.samples = self.outdir / "samples"
         self.limit = max(1, int(limit))
         self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
@@ -250,6 +252,8 @@ class _SampleRenders:
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
                 _sample_paths(self.outdir, k)[2].unlink(missing_ok=True)
+            if self.on_done is not None:
+                self.on_done()
 
     def _collect(self, k: int, proc: subprocess.Popen, tmp: Path) -> None:
         pov = self.samples / f"batch_{self.batch:03d}.pov"
@@ -280,7 +284,8 @@ class _SampleRenders:
 
 
 def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: int,
-                   samples: list[int], points=None, in_flight: int = POVRAY_IN_FLIGHT) -> dict:
+                   samples: list[int], points=None, in_flight: int = POVRAY_IN_FLIGHT,
+                   stop=None, on_done=None) -> dict:
     """Trace, write and render lens samples ``samples`` of batch ``batch``, pipelined.
 
     For each sample in turn: trace its rays and write its mesh and weights
@@ -288,7 +293,9 @@ def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: 
     sample while it runs (at most ``in_flight`` at once).  Samples whose rays are
     all blocked are not rendered.  ``sampler`` is the lens sampler (normally the
     plan's exit-pupil table); ``points(k)`` overrides the plan's sample points
-    (:mod:`povlens.bench`).  Returns timings: {samples, blocked,
+    (:mod:`povlens.bench`).  ``stop``: a :class:`threading.Event`; once set, no
+    further sample starts and the running ones are stopped.  ``on_done()`` is called
+    as each sample is finished (progress).  Returns timings: {samples, blocked,
     rays_and_meshes_s (Python), povray_s (summed over the overlapping processes),
     wall_s}.
     """
@@ -296,9 +303,12 @@ def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: 
     t0 = time.perf_counter()
     t_mesh = 0.0
     blocked = 0
-    queue = _SampleRenders(plan, outdir, batch, in_flight)
+    queue = _SampleRenders(plan, outdir, batch, in_flight, on_done)
     try:
         for k in samples:
+            if stop is not None and stop.is_set():
+                queue.abort()
+                break
             t = time.perf_counter()
             ok = _write_mesh(plan, lens, sampler, outdir, k,
                              points=None if points is None else points(k))
@@ -307,6 +317,8 @@ def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: 
                 queue.start(k)
             else:
                 blocked += 1
+                if on_done is not None:
+                    on_done()
             queue._reap(block=False)
         queue.finish()
     except BaseException:
@@ -417,170 +429,107 @@ def _progress(total: int, desc: str, quiet: bool):
                 file=sys.stderr)
 
 
-class Workers:
-    """``povlens render-batch --wait`` processes started before the plan exists.
-
-    ``povlens render`` starts one per job for batches 0..jobs-1 before it converts,
-    so their start-up (Python and its libraries, ~0.5 s per process) overlaps the
-    conversion (and the depth probe of ``--method auto``).  :func:`render_outdir`
-    sends "go" to those whose batch needs rendering and "stop" to the others;
-    :meth:`close` stops any still waiting."""
-
-    def __init__(self, outdir: str | os.PathLike, jobs: int,
-                 in_flight: int = POVRAY_IN_FLIGHT):
-        self.outdir = Path(outdir)
-        self.procs: dict[int, subprocess.Popen] = {}
-        for b in range(max(1, int(jobs))):
-            self.procs[b] = subprocess.Popen(
-                [sys.executable, "-m", "povlens", "render-batch", str(self.outdir), str(b),
-                 "--in-flight", str(in_flight), "--wait"],
-                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                text=True, errors="replace")
-
-    def release(self, batches: set[int]) -> dict[int, subprocess.Popen]:
-        """Start the waiting workers of ``batches``, stop the rest; returns the started."""
-        started = {}
-        for b, p in self.procs.items():
-            go = b in batches
-            try:
-                p.stdin.write("go\n" if go else "stop\n")
-                p.stdin.close()
-            except OSError:
-                pass
-            if go:
-                started[b] = p
-            else:
-                p.stderr.close()
-                p.wait()
-        self.procs = {}
-        return started
-
-    def close(self) -> None:
-        self.release(set())
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        for p in self.procs.values():
-            p.terminate()
-            p.wait()
-        self.procs = {}
-
-
-def _run_batches_in_subprocesses(outdir: Path, batches: list[int], jobs: int, bar,
-                                 samples: list[int], in_flight: int = POVRAY_IN_FLIGHT,
-                                 workers: Workers | None = None) -> None:
-    """Run ``povlens render-batch`` for each batch, ``jobs`` at a time; ``bar``
-    counts the finished ``samples`` (polled from the sample folder).  ``workers``:
-    processes already started (and waiting) for some batches.
-
-    Separate processes (as make runs them) rather than a fork-based pool: forking a
-    process whose image and BLAS libraries have started threads can deadlock.
-    """
-    procs: dict[int, subprocess.Popen] = {}
-    if workers is not None:
-        procs = workers.release(set(batches))
-    pending = [b for b in batches if b not in procs]
-    failure = None
-    try:
-        while pending or procs:
-            while pending and len(procs) < jobs and failure is None:
-                b = pending.pop(0)
-                procs[b] = subprocess.Popen(
-                    [sys.executable, "-m", "povlens", "render-batch", str(outdir), str(b),
-                     "--in-flight", str(in_flight)],
-                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                    text=True, errors="replace")
-            if not procs:
-                break
-            finished = [b for b, p in procs.items() if p.poll() is not None]
-            n_done = sum(_sample_done(outdir, k) for k in samples)
-            if n_done > bar.n:
-                bar.update(n_done - bar.n)
-            if not finished:
-                time.sleep(0.05)
-                continue
-            for b in finished:
-                p = procs.pop(b)
-                err = p.stderr.read()
-                p.stderr.close()
-                if p.returncode != 0 and failure is None:
-                    failure = (b, p.returncode, err)
-                    pending.clear()
-    finally:
-        for p in procs.values():  # interrupted: stop the running batches
-            p.terminate()
-        for p in procs.values():
-            p.wait()
-    if failure is not None:
-        b, code, err = failure
-        msg = err.strip().removeprefix("povlens render-batch: error: ")
-        cls = PovrayError if code == PovrayError.exit_code else PovlensError
-        raise cls(f"batch {b}: {msg}")
+def _mark_batches_done(outdir: Path, plan: dict) -> None:
+    """Write ``batch_BBB.done`` (make's target) for each batch whose samples are done."""
+    for b, ks in enumerate(plan["batches"]):
+        if all(_sample_done(outdir, k) for k in ks):
+            write_text(outdir / "samples" / f"batch_{b:03d}.done", "".join(f"{k}\n" for k in ks))
 
 
 def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: bool = False,
-                  in_flight: int = POVRAY_IN_FLIGHT, workers: Workers | None = None) -> Path:
-    """Render everything a converted folder needs, in parallel, and composite.
+                  in_flight: int | None = None) -> Path:
+    """Render everything a converted folder needs and composite.
 
-    Mesh plans: ``jobs`` batch workers at once (default one per core), each with up
-    to ``in_flight`` POV-Ray processes (:func:`render_samples`); ``workers`` are
-    batch workers started earlier (:class:`Workers`), used or stopped here."""
+    Mesh plans: every lens sample not yet rendered, in this process
+    (:func:`render_samples`: trace, write the mesh, start its POV-Ray process, go
+    on), with up to ``in_flight`` POV-Ray processes at once (default
+    :data:`POVRAY_IN_FLIGHT` per core, ``jobs`` cores, default all).  One process
+    with the lens and pupil table in memory is faster here than a worker process
+    per batch (2 cores; paper.pov, dgauss.50mm, 160x120: N = 8 1.40 s against
+    1.98-2.14 s, N = 32 3.52-3.55 s against 4.32-4.38 s; 480x360 N = 16 14.1-14.5 s
+    against 15.9 s): a worker's Python start-up costs more than the tracing it
+    would share.  ``make -jN`` in the folder renders its batches in parallel
+    processes (``povlens render-batch``)."""
     outdir = Path(outdir)
     plan = read_plan(outdir)
     method = plan["inputs"]["method"]
-    if method != "mesh" or jobs == 1:
-        if workers is not None:
-            workers.close()
     if method != "mesh":
         render_view(outdir, method)
         return outdir / "image.exr"
     jobs = jobs or os.cpu_count() or 1
-    todo = [b for b, ks in enumerate(plan["batches"])
-            if not all(_sample_done(outdir, k) for k in ks)]
+    in_flight = in_flight or POVRAY_IN_FLIGHT * jobs
+    todo = [k for k in range(plan["inputs"]["samples"]) if not _sample_done(outdir, k)]
     if todo:
         lens = lens_for(plan)
-        table = pupil_table_for(outdir, plan, lens)  # build once, before the workers start
+        table = pupil_table_for(outdir, plan, lens)
         _exposure(outdir, plan, lens, table)
-        samples = [k for b in todo for k in plan["batches"][b] if not _sample_done(outdir, k)]
-        with _progress(len(samples), "lens samples", quiet) as bar:
-            if jobs == 1:
-                for b in todo:
-                    bar.update(len(render_batch(outdir, b, in_flight=in_flight)))
-            else:
-                _run_batches_in_subprocesses(outdir, todo, jobs, bar, samples, in_flight,
-                                             workers)
-    if workers is not None:
-        workers.close()     # nothing (left) to render for those still waiting
+        with _progress(len(todo), "lens samples", quiet) as bar:
+            timing = render_samples(plan, lens, table, outdir, 0, todo, in_flight=in_flight,
+                                    on_done=lambda: bar.update(1))
+        write_text(outdir / "samples" / "render.timing.json", json.dumps(timing) + "\n")
+    _mark_batches_done(outdir, plan)
     composite_outdir(outdir)
     return outdir / "image.exr"
+
+
+class _EarlyRender:
+    """The lens samples of a provisional plan, rendered in a thread of this process
+    while :func:`povlens.convert.convert` goes on (its ``render_early``): the lens
+    and pupil table are already in memory.  ``wait()`` waits and raises what the
+    render raised, ``cancel()`` stops it (what it finished stays)."""
+
+    def __init__(self, outdir: Path, plan: dict, lens, table, in_flight: int, quiet: bool):
+        import threading
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(
+            target=self._run, args=(Path(outdir), plan, lens, table, in_flight, quiet),
+            daemon=True)
+        self._thread.start()
+
+    def _run(self, outdir, plan, lens, table, in_flight, quiet):
+        try:
+            todo = [k for k in range(plan["inputs"]["samples"]) if not _sample_done(outdir, k)]
+            if todo:
+                with _progress(len(todo), "lens samples (while probing)", quiet) as bar:
+                    timing = render_samples(plan, lens, table, outdir, 0, todo,
+                                            in_flight=in_flight, stop=self._stop,
+                                            on_done=lambda: bar.update(1))
+                write_text(outdir / "samples" / "early.timing.json", json.dumps(timing) + "\n")
+            _mark_batches_done(outdir, plan)
+        except BaseException as e:      # handed to wait()
+            self._error = e
+
+    def wait(self) -> None:
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+
+    def cancel(self) -> None:
+        self._stop.set()
+        self._thread.join()
 
 
 def convert_and_render(opts, jobs: int | None = None, quiet: bool = False,
                        on_plan=None) -> tuple[dict, Path]:
     """What ``povlens render`` does: convert ``opts`` (a
-    :class:`povlens.convert.ConvertOptions`) and render the folder.
+    :class:`povlens.convert.ConvertOptions`) and render the folder
+    (:func:`render_outdir`).
 
-    Mesh render workers start (Python and its libraries, ~0.5 s) as soon as the plan
-    is known to be a mesh render, so their start-up overlaps the rest of the
-    conversion; a focal_blur render --method auto is likely to choose starts while
-    its depth probe runs (``speculate``).  ``on_plan(plan)`` is called between
-    conversion and rendering.  Returns (plan, path of image.exr)."""
-    import contextlib
+    With --method auto, the render auto is likely to choose starts while its depth
+    probe runs (``speculate`` of :func:`povlens.convert.convert`): the adaptive
+    focal_blur view, or, when the lens alone rules out the views, the first lens
+    samples of the mesh render (``render_early``).  ``on_plan(plan)`` is called
+    between conversion and rendering.  Returns (plan, path of image.exr)."""
     import dataclasses
     from .convert import convert
     jobs = jobs or os.cpu_count() or 1
-    with contextlib.ExitStack() as stack:
-        workers = []
 
-        def start_workers():
-            if jobs > 1:
-                workers.append(stack.enter_context(Workers(opts.outdir, jobs)))
+    def render_early(plan, lens, table):
+        return _EarlyRender(Path(opts.outdir), plan, lens, table, POVRAY_IN_FLIGHT * jobs,
+                            quiet)
 
-        plan = convert(dataclasses.replace(opts, speculate=True), on_mesh=start_workers)
-        if on_plan is not None:
-            on_plan(plan)
-        out = render_outdir(opts.outdir, jobs=jobs, quiet=quiet,
-                            workers=workers[0] if workers else None)
-    return plan, out
+    plan = convert(dataclasses.replace(opts, speculate=True), render_early=render_early)
+    if on_plan is not None:
+        on_plan(plan)
+    return plan, render_outdir(opts.outdir, jobs=jobs, quiet=quiet)

@@ -41,7 +41,7 @@ def test_convert_writes_plan_wrappers_and_makefile(tmp_path):
                  "samples/batch_000.pov", "samples/batch_001.pov"):
         assert (out / name).exists(), name
     saved = json.loads((out / "plan.json").read_text())
-    assert saved["batches"] == [[0, 1], [2, 3]]
+    assert saved["batches"] == [[0, 2], [1, 3]]        # dealt round-robin
     cam = saved["povray_camera"]
     # focal_blur aperture is twice the entrance-pupil diameter, in scene units (m)
     assert cam["aperture"] == pytest.approx(2 * 24.8051e-3, rel=1e-4)
@@ -73,7 +73,7 @@ def test_interrupted_render_resumes_to_the_same_image(tmp_path):
     part = tmp_path / "part"
     convert(opts(tmp_path, outdir=str(part)))
     render_batch(part, 0)                              # the run stops after one batch ...
-    (part / "samples" / "sample_0001.exr").unlink()    # ... and one sample of it is lost
+    (part / "samples" / "sample_0002.exr").unlink()    # ... and one sample of it is lost
     render_outdir(part, jobs=2, quiet=True)            # re-run
     np.testing.assert_array_equal(read_image(part / "image.exr"), reference)
 
@@ -242,22 +242,47 @@ def test_more_samples_reuse_the_rendered_ones(tmp_path):
     assert not list(s.glob("sample_*.exr")) and not (out / "exposure.txt").exists()
 
 
-def test_workers_started_before_the_plan_render_the_same_image(tmp_path):
-    from povlens.render import Workers
-    ref = tmp_path / "ref"
-    convert(opts(tmp_path, outdir=str(ref), samples=4, batch_size=2))
-    render_outdir(ref, jobs=2, quiet=True)
-    pre = tmp_path / "pre"
-    with Workers(pre, 3) as w:                    # one more worker than batches
-        convert(opts(tmp_path, outdir=str(pre), samples=4, batch_size=2))
-        render_outdir(pre, jobs=2, quiet=True, workers=w)
-    np.testing.assert_array_equal(read_image(pre / "image.exr"), read_image(ref / "image.exr"))
-    assert all(p.poll() is not None for p in w.procs.values())
-    # a plan that is not a mesh render: the waiting workers are stopped
-    view = tmp_path / "view"
-    with Workers(view, 2) as w:
-        procs = list(w.procs.values())
-        convert(opts(tmp_path, outdir=str(view), method="pinhole", samples=1))
-        render_outdir(view, jobs=2, quiet=True, workers=w)
-    assert all(p.poll() == 0 for p in procs)
-    assert (view / "image.exr").exists() and not (view / "samples").exists()
+def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path):
+    """dgauss.50mm vignettes (relative illumination ~0.33): the lens alone rules out
+    the views, so povlens render starts lens samples 0..7 while the depth probe
+    runs.  The result equals a fixed mesh render of the decided sample count."""
+    from povlens.render import convert_and_render
+    auto = tmp_path / "auto"
+    plan, _ = convert_and_render(opts(tmp_path, outdir=str(auto), method="auto",
+                                      batch_size=None), quiet=True)
+    assert plan["inputs"]["method"] == "mesh" and "provisional" not in plan["decision"]
+    assert any("while the depth probe ran" in r for r in plan["decision"]["reasons"])
+    early = json.loads((auto / "samples" / "early.timing.json").read_text())
+    n = plan["inputs"]["samples"]
+    assert early["samples"] == 8 and n >= 8
+    fixed = tmp_path / "fixed"
+    convert(opts(tmp_path, outdir=str(fixed), method="mesh", samples=n, batch_size=None))
+    render_outdir(fixed, quiet=True)
+    np.testing.assert_array_equal(read_image(auto / "image.exr"), read_image(fixed / "image.exr"))
+    r = subprocess.run(["make", "-C", str(auto)], capture_output=True, text=True)
+    assert r.returncode == 0 and "Nothing to be done" in r.stdout
+
+
+def test_a_cancelled_early_render_leaves_no_povray_and_resumes(tmp_path):
+    from povlens.render import _EarlyRender, lens_for, pupil_table_for
+    out = tmp_path / "out"
+    plan = convert(opts(tmp_path, samples=24, batch_size=None))
+    lens = lens_for(plan)
+    table = pupil_table_for(out, plan, lens)
+    early = _EarlyRender(out, plan, lens, table, in_flight=4, quiet=True)
+    import time
+    t0 = time.monotonic()
+    while not [f for f in (out / "samples").glob("sample_*.exr") if ".weight" not in f.name]:
+        assert time.monotonic() - t0 < 60                  # a sample's image is in
+        time.sleep(0.01)
+    early.cancel()
+    early.wait()
+    assert _processes_in(out / "samples") == []
+    assert not list((out / "samples").glob("*.inc")) and not list((out / "samples").glob(".s*"))
+    done = [k for k in range(24) if (out / "samples" / f"sample_{k:04d}.exr").exists()]
+    assert 0 < len(done) < 24
+    render_outdir(out, quiet=True)
+    full = tmp_path / "full"
+    convert(opts(tmp_path, outdir=str(full), samples=24, batch_size=None))
+    render_outdir(full, quiet=True)
+    np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(full / "image.exr"))

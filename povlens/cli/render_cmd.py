@@ -126,8 +126,17 @@ def run_convert(args) -> int:
     return 0
 
 
+def _unwind_on_sigterm() -> None:
+    """Terminated (make, a batch system, kill): unwind as on Ctrl-C, so the POV-Ray
+    processes started are stopped and their partial files removed."""
+    import signal
+    import sys
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
+
+
 def run_render(args) -> int:
     from ..render import convert_and_render
+    _unwind_on_sigterm()
     _, out = convert_and_render(options_from_args(args), jobs=args.jobs, quiet=args.quiet,
                                 on_plan=None if args.quiet else
                                 (lambda plan: print(_summary(plan))))
@@ -143,23 +152,8 @@ def run_composite(args) -> int:
 
 
 def run_batch(args) -> int:
-    import signal
-    import sys
     from ..render import render_batch
-    # Terminated (an interrupted 'povlens render', or make): unwind, so the batch
-    # stops the POV-Ray processes it started and removes their partial files.
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
-    if args.wait:
-        # started before the plan exists ('povlens render' spawns its workers while it
-        # converts): import everything now, then wait for "go" (anything else: stop)
-        import importlib
-        for mod in ("pupil", "sampling", "lens_camera", "mesh_camera"):
-            importlib.import_module(f"povlens.{mod}")
-        if sys.stdin.readline().strip() != "go":
-            return 0
-        from ..convert import read_plan
-        if args.batch >= len(read_plan(args.outdir).get("batches", [])):
-            return 0
+    _unwind_on_sigterm()
     render_batch(args.outdir, args.batch, in_flight=args.in_flight)
     return 0
 
@@ -184,8 +178,9 @@ def register(sub) -> None:
                                    "Re-running resumes an interrupted render.")
     _add_convert_arguments(p)
     p.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1,
-                   help="render workers at once, each tracing lens samples and running up "
-                        "to 4 POV-Ray processes (default: number of cores)")
+                   help="cores to use: up to 4 POV-Ray processes per core run at once "
+                        "(each spends most of its ~0.6 s start-up idle; default: number "
+                        "of cores)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=run_render)
 
@@ -199,10 +194,6 @@ def register(sub) -> None:
     p = sub.add_parser("render-batch", help="render one batch of lens samples (used by make)")
     p.add_argument("outdir", metavar="OUTDIR")
     p.add_argument("batch", type=int, metavar="BATCH")
-    p.add_argument("--wait", action="store_true",
-                   help="import, then wait for a line 'go' on standard input before reading "
-                        "the plan (used by 'povlens render'; exit 0 on anything else or if "
-                        "the plan has no such batch)")
     p.add_argument("--in-flight", type=int, default=4, metavar="N",
                    help="POV-Ray processes running at once (default 4: each spends most of "
                         "its ~0.6 s start-up idle, so several overlap on one core)")
