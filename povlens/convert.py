@@ -526,13 +526,16 @@ def _focal_blur_text(plan: dict, out: Path) -> str:
 
 
 def _lens_rules_out_views(opts: ConvertOptions, plan0: dict) -> bool:
-    """True when the lens alone makes --method auto choose mesh: vignetting that is
-    wanted (focal_blur and pinhole have none; it does not depend on depth) or
-    distortion over the budget at the plan's standard depths."""
-    from .auto_plan import VIGNETTING_TOLERANCE
+    """The guess, before the depth probe is in, that --method auto will choose mesh:
+    distortion over the budget at the plan's standard depths, or vignetting that is
+    wanted and strong (relative illumination below
+    :data:`povlens.auto_plan.STRONG_VIGNETTING` somewhere in the frame).  Only
+    work started early depends on it (:func:`convert`: the first lens samples, or
+    else the focal_blur view); the decision itself waits for the probe."""
+    from .auto_plan import STRONG_VIGNETTING
     e = plan0["model_error"]
-    return bool((opts.vignetting and e["min_relative_illumination"]
-                 < 1.0 - VIGNETTING_TOLERANCE) or e["max_distortion_px"] >= opts.tolerance_px)
+    return bool((opts.vignetting and e["min_relative_illumination"] < STRONG_VIGNETTING)
+                or e["max_distortion_px"] >= opts.tolerance_px)
 
 
 def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict):

@@ -129,8 +129,12 @@ def probe_depth(outdir: str | os.PathLike, fog_distance: float | None = None,
 def start_probe(plan: dict, folder: str | os.PathLike, *, width: int | None = None,
                 height: int | None = None, fog_distance: float | None = None,
                 threads: int | None = None, keep_wrappers: bool = True,
-                prefix: str = ".depth.", label: str | None = None) -> "DepthProbe":
+                prefix: str = ".depth.", label: str | None = None,
+                view: bool = False) -> "DepthProbe":
     """Start the two fogged renders of ``plan``'s pinhole view; returns at once.
+    With ``view``, a third render of the same view without fog runs beside them
+    (:attr:`DepthProbe.image` once collected: what the scene looks like, for
+    estimates of image error).
 
     ``plan`` needs ``povray_camera``, ``inputs.scene`` and ``inputs.focus`` (and
     ``film.width_px`` / ``height_px`` unless ``width`` / ``height`` are given:
@@ -163,6 +167,10 @@ def start_probe(plan: dict, folder: str | os.PathLike, *, width: int | None = No
                              fog_wrapper(base, fog_distance, white))
             probe._jobs[name] = start_render(pov, tmp / f"{name}.exr", w, h, threads=threads,
                                              library_paths=[scene.parent])
+        if view:
+            pov = write_text(wrappers / "depth_view.pov", base)
+            probe._jobs["view"] = start_render(pov, tmp / "view.exr", w, h, threads=threads,
+                                               library_paths=[scene.parent])
     except BaseException:
         probe.cancel()
         raise
@@ -179,6 +187,8 @@ class DepthProbe:
         self.plan, self.fog_distance, self.label = plan, fog_distance, label
         self._tmp = tmp
         self._jobs: dict = {}
+        #: (H, W, 3) linear image of the view without fog (``view=True``), once collected.
+        self.image: np.ndarray | None = None
 
     def result(self) -> np.ndarray:
         """Wait for both renders; per-pixel distances (H, W) in scene units, ``inf``
@@ -189,6 +199,8 @@ class DepthProbe:
             images = {name: read_image(job.wait()) for name, job in self._jobs.items()}
         finally:
             self.cancel()
+        if "view" in images:
+            self.image = np.asarray(images["view"][..., :3], dtype=np.float64)
         d = distance_from_fog(images["white"], images["black"], self.fog_distance)
         if np.all(d[np.isfinite(d)] < 1e-3 * self.fog_distance) and np.isfinite(d).any():
             raise PovlensError(

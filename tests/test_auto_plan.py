@@ -143,3 +143,83 @@ def test_no_speculative_render_when_the_lens_vignettes(tmp_path):
     assert plan["inputs"]["method"] == "mesh"
     assert not (out / "view-focal-blur.exr").exists()
     assert not list(out.glob(".speculative*"))
+
+
+def test_shape_error_is_how_far_the_long_axis_reaches_beyond_the_equivalent_disc():
+    """Sampled uniform ellipses: the long-axis extent (4 sqrt(l_max)) minus the
+    diameter of the disc of the same RMS radius (2 sqrt(2) rho) is the formula."""
+    import numpy as np
+    from povlens.auto_plan import shape_error_px
+    rng = np.random.default_rng(1)
+    u = rng.random(400_000)
+    t = rng.random(400_000) * 2 * np.pi
+    disc = np.sqrt(u)[:, None] * np.column_stack([np.cos(t), np.sin(t)])   # unit disc
+    for a, b in [(1.0, 1.0), (2.0, 1.0), (5.0, 0.5), (3.0, 0.01)]:
+        xy = disc * [a, b]
+        ev = np.linalg.eigvalsh(np.cov(xy.T))
+        rho = np.sqrt(ev.sum())
+        blur = 2 * np.sqrt(2) * rho                           # measure_model_error's blur
+        e = np.sqrt(ev[1] / ev[0])
+        long_extent = 2 * np.abs(xy[:, 0]).max()              # the ellipse's real long axis
+        assert float(shape_error_px(blur, e)) == pytest.approx(long_extent - blur,
+                                                               abs=2e-3 * blur)
+    # round: 0; a line: (sqrt(2) - 1) b at most, never the old (e - 1) b
+    assert float(shape_error_px(3.0, 1.0)) == 0.0
+    assert float(shape_error_px(3.0, 1e9)) == pytest.approx((math.sqrt(2) - 1) * 3.0)
+
+
+def test_vignetting_and_shift_rmse_on_simple_images():
+    import numpy as np
+    from povlens.auto_plan import shift_rmse, vignetting_rmse
+    img = np.ones((10, 20, 3))
+    ri = np.full((10, 20), 0.8)
+    assert vignetting_rmse(img, ri) == pytest.approx(0.2)
+    assert vignetting_rmse(img, np.ones((10, 20))) == 0.0
+    assert shift_rmse(img, 0.5) == 0.0                        # flat: moving changes nothing
+    # a vertical step edge: only x moves change it, by f on the one column it crosses
+    step = np.zeros((10, 20, 3))
+    step[:, 10:] = 1.0
+    f = 0.25
+    per_x = math.sqrt(f ** 2 / 19)                            # 1 of 19 compared columns
+    assert shift_rmse(step, f) == pytest.approx((2 * per_x + 0 + 0) / 4)
+    # ramp: every pixel changes by slope x shift
+    ramp = np.tile(np.arange(20.0)[None, :, None], (10, 1, 3)) * 0.01
+    assert shift_rmse(ramp, 1.5) == pytest.approx(0.5 * 0.015)
+
+
+def test_probe_renders_the_view_and_the_decision_judges_vignetting_by_it(tmp_path):
+    """The probe's fog-free view equals a pinhole render at the probe size; a lens
+    whose corners lose 12 % (cooke.triplet.50mm) is a deviation on a bright scene
+    and none on the same scene made dark at the edges."""
+    import numpy as np
+    from povlens.auto_plan import (probe_image_error, probe_size, start_depth_probe)
+    from povlens.images import read_image
+    from povlens.povray import render
+    out = tmp_path / "o"
+    out.mkdir()
+    opts = ConvertOptions(scene=PAPER, lens="cooke.triplet.50mm", focus=4.0, outdir=str(out),
+                          width=96, height=72, method="mesh")
+    plan, L, model, film = _make_plan(opts)
+    probe = start_depth_probe(opts, film, plan)
+    probe.result()
+    pw, ph = probe_size(film)
+    assert probe.image.shape == (ph, pw, 3)
+    (out / "pin.pov").write_text((ROOT / "scenes" / "paper.pov").read_text())
+    from povlens.convert import _write_folder
+    _write_folder(out, plan)
+    ref = read_image(render(out / "pinhole.pov", out / "pin.exr", pw, ph))[..., :3]
+    np.testing.assert_allclose(probe.image, ref, atol=2e-3)
+    e = plan["model_error"]
+    bright = probe_image_error(np.ones((ph, pw, 3)) + 0.01 * (np.arange(pw) % 2)[None, :, None],
+                               film, e, 0.5)
+    assert bright["vignetting_rmse"] > bright["shift_rmse"]     # flat bright: vignetting shows
+    dark_edges = probe.image.copy()
+    r = np.hypot(*np.meshgrid(np.linspace(-1, 1, pw), np.linspace(-1, 1, ph)))
+    dark_edges[r > 0.6] = 0.0
+    dark = probe_image_error(dark_edges, film, e, 0.5)
+    assert dark["vignetting_rmse"] < 0.2 * bright["vignetting_rmse"]
+    near = model.centre_z_mm + 3000.0
+    kw = dict(near_z_mm=near, far_z_mm=near + 10000.0, model=model, model_error=e,
+              pixel_pitch_mm=film.pixel_pitch_mm)
+    assert "at least the" in " ".join(decide(**kw, image_error=bright)["reasons"])
+    assert "less than the" in " ".join(decide(**kw, image_error=dark)["reasons"])
