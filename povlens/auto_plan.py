@@ -58,7 +58,8 @@ The choice is made from measurements, not guesses:
    depth-dependent count, so ``povlens render`` can start it while the probe
    runs (:func:`povlens.convert.convert`, ``speculate``).
 4. **Adaptive mesh sampling** (``--adaptive``, off by default) — :func:`adaptive_rows`:
-   per band of 8 rows the same rule from the probe's blur (floor 8), and
+   per band of 8 rows the same rule from the probe's blur, thin-lens or real
+   spot, whichever is larger (floor 8), and
    :func:`sample_row_ranges`: sample k renders only the rows of the bands that
    need more than k samples (+SR/+ER); the composite divides each pixel by its own
    sample count.
@@ -72,7 +73,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "shape_error_px", "vignetting_rmse", "shift_rmse",
-           "probe_image_error", "film_radius_map_mm", "blur_range_px", "measure_depth_range", "choose_method", "adaptive_rows",
+           "probe_image_error", "film_radius_map_mm", "real_blur_at", "real_blur_model_error", "blur_range_px", "measure_depth_range", "choose_method", "adaptive_rows",
            "measure_depth_map", "start_depth_probe", "probe_axial_mm", "sample_row_ranges",
            "model_depths", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "VIGNETTING_TOLERANCE",
            "STRONG_VIGNETTING"]
@@ -403,15 +404,46 @@ def measure_depth_range(opts, film, threads: int | None = None,
 BAND_ROWS, ADAPTIVE_MIN_SAMPLES = 8, MIN_SAMPLES
 
 
+def real_blur_at(model_error: dict, model, axial_mm: np.ndarray) -> np.ndarray:
+    """Real spot size (px, equivalent-disc diameter, largest over the field) at
+    axial distances ``axial_mm`` from the entrance pupil (inf: the farthest depth
+    measured), interpolated in log distance between the depths of
+    ``model_error`` (:func:`povlens.thin_lens.measure_model_error`), held
+    constant beyond them."""
+    z = np.asarray(model_error["object_z_mm"], dtype=float) - model.centre_z_mm
+    real = np.asarray(model_error["blur_real_px"], dtype=float).max(axis=1)
+    order = np.argsort(z)
+    z, real = np.log(np.maximum(z[order], 1e-9)), real[order]
+    a = np.asarray(axial_mm, dtype=float)
+    la = np.log(np.where(np.isfinite(a) & (a > 0), a, np.exp(z[-1])))
+    return np.interp(la, z, real)
+
+
+def real_blur_model_error(lens, plan: dict, model, film, axial_mm: np.ndarray) -> dict:
+    """:func:`povlens.thin_lens.measure_model_error` at depths spanning a depth
+    probe's range (``axial_mm`` from the entrance pupil), for :func:`real_blur_at`."""
+    from .thin_lens import measure_model_error
+    near, far, _ = _depth_limits(axial_mm)
+    if math.isinf(near):
+        near = far = 1e4 * max(model.focus_distance_mm if math.isfinite(model.focus_distance_mm)
+                               else 1e3, 1e3)
+    c = model.centre_z_mm
+    return measure_model_error(lens, plan["focus"]["film_distance_mm"], model, film,
+                               model_depths(model, c + near, c + far))
+
+
 def adaptive_rows(model, axial_mm: np.ndarray, film, n_max: int, band_rows: int = BAND_ROWS,
-                  n_min: int = ADAPTIVE_MIN_SAMPLES) -> dict:
+                  n_min: int = ADAPTIVE_MIN_SAMPLES, model_error: dict | None = None) -> dict:
     """Samples each band of ``band_rows`` image rows needs, from a depth probe.
 
-    Per probe pixel the thin-lens blur b (px of ``film``) at its depth; a row's blur
-    is the largest b of any probe pixel within b/2 + 1 rows of it (a blurred point
-    spreads over b rows, so light from a blurred neighbour counts too); a band's is
-    its rows' maximum; its samples ``clamp(ceil(SAMPLE_K b^2), n_min, n_max)``, the
-    rule of :func:`decide`.  Returns {band_rows, n_min, band_blur_px, band_samples}.
+    Per probe pixel the blur b (px of ``film``) at its depth: the thin-lens blur,
+    or the real spot (:func:`real_blur_at`) where ``model_error`` is given and it
+    is larger (aberrations: a fast singlet's spot is far larger than its thin-lens
+    blur).  A row's blur is the largest b of any probe pixel within b/2 + 1 rows of
+    it (a blurred point spreads over b rows, so light from a blurred neighbour
+    counts too); a band's is its rows' maximum; its samples
+    ``clamp(ceil(SAMPLE_K b^2), n_min, n_max)``, the rule of :func:`decide`.
+    Returns {band_rows, n_min, band_blur_px, band_samples}.
     """
     a = np.asarray(axial_mm, dtype=float)
     ph = a.shape[0]
@@ -424,6 +456,8 @@ def adaptive_rows(model, axial_mm: np.ndarray, film, n_max: int, band_rows: int 
     fin = np.isfinite(a) & (a > 0)
     if fin.any():
         blur[fin] = model.blur_diameter_mm(model.centre_z_mm + a[fin]) / pitch
+    if model_error is not None:
+        blur = np.maximum(blur, real_blur_at(model_error, model, a))
     probe_row_blur = blur.max(axis=1)                       # (ph,)
     # film rows covered by probe row i: [i h / ph, (i + 1) h / ph)
     row_blur = np.zeros(h)
@@ -497,5 +531,5 @@ def choose_method(opts, plan: dict, model, lens, film, *, probe=None,
                vignetting=opts.vignetting, image_error=image_error)
     d["numbers"]["depth_probe"] = info
     if getattr(opts, "adaptive", False):
-        d["adaptive"] = adaptive_rows(model, axial, film, d["samples"])
+        d["adaptive"] = adaptive_rows(model, axial, film, d["samples"], model_error=err)
     return d

@@ -427,9 +427,12 @@ def convert(opts: ConvertOptions, render_early=None) -> dict:
     if opts.adaptive and opts.method == "mesh":
         adaptive = decision.pop("adaptive", None) if decision is not None else None
         if adaptive is None:
-            from .auto_plan import adaptive_rows, measure_depth_map
-            _, _, model, film = _make_plan(opts)
-            adaptive = adaptive_rows(model, measure_depth_map(opts, film), film, opts.samples)
+            from .auto_plan import adaptive_rows, measure_depth_map, real_blur_model_error
+            plan1, lens1, model, film = _make_plan(opts)
+            axial = measure_depth_map(opts, film, plan=plan1)
+            adaptive = adaptive_rows(model, axial, film, opts.samples,
+                                     model_error=real_blur_model_error(
+                                         lens1, plan1, model, film, axial))
         else:
             from .auto_plan import SAMPLE_K
             n_min = min(adaptive["n_min"], opts.samples)

@@ -131,3 +131,23 @@ def test_blocked_sample_is_not_rendered_and_counts_as_black(tmp_path, monkeypatc
     (tmp_path / "b" / "plan.json").write_text(json.dumps(plan_one))
     img1 = composite_outdir(tmp_path / "b", write=False)
     np.testing.assert_allclose(img, img1 / 2, rtol=1e-6, atol=1e-9)
+
+
+def test_adaptive_bands_use_the_real_spot_where_it_is_larger_than_the_thin_lens_blur():
+    """The f/1 singlet focused at 2 m: its thin-lens blur at 2 m is 0, but its
+    spherical aberration makes a spot of many pixels, so every band needs more
+    than the floor (before: every band 8 where the decision wanted 256)."""
+    from povlens.auto_plan import adaptive_rows, real_blur_at, real_blur_model_error
+    from povlens.convert import _make_plan
+    o = ConvertOptions(scene=str(SCENES / "paper.pov"), lens="singlet.pcx.25mm", focus=2.0,
+                       outdir="unused", width=48, height=36, method="mesh", samples=256)
+    plan, lens, model, film = _make_plan(o)
+    axial = np.full((12, 16), 2000.0)                       # everything at the focus
+    thin = adaptive_rows(model, axial, film, 256)
+    assert set(thin["band_samples"]) == {8}
+    err = real_blur_model_error(lens, plan, model, film, axial)
+    spot = real_blur_at(err, model, axial)
+    assert np.all(spot > 3.0)                               # px: far from sharp
+    real = adaptive_rows(model, axial, film, 256, model_error=err)
+    assert min(real["band_samples"]) > 8
+    assert min(real["band_blur_px"]) == pytest.approx(float(spot.max()), rel=1e-9)

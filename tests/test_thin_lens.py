@@ -5,6 +5,7 @@ from povlens.film import Film
 from povlens.focus import thick_lens_film_distance_mm
 from povlens.paraxial import paraxial_data
 from povlens.prescription import parse_lens_text, read_lens
+from povlens.pupil import build_pupil_table
 from povlens.thin_lens import chief_rays, fit_thin_lens, measure_model_error
 
 from conftest import LENS_DIR
@@ -88,3 +89,24 @@ def test_vignetting_from_the_pupil_table_does_not_depend_on_the_stop_size():
         ri.append(e["min_relative_illumination"])
     assert ri[0] == pytest.approx(ri[1], abs=0.02)
     assert 0.5 < ri[0] < 0.95  # natural (cos^4-like) fall-off at the corner remains
+
+
+@pytest.mark.parametrize("lens_name", ["dgauss.50mm", "fisheye.10mm", "singlet.pcx.25mm",
+                                       "wide.22mm"])
+@pytest.mark.parametrize("with_table", [False, True])
+def test_vectorized_model_error_equals_the_bundle_by_bundle_reference(lens_name, with_table):
+    from povlens.thin_lens import measure_model_error_reference
+    lens = read_lens(lens_name)
+    film = Film.from_diagonal(43.27, 96, 64)
+    p = paraxial_data(lens)
+    f = thick_lens_film_distance_mm(lens, 3000.0, p)
+    m = fit_thin_lens(lens, f, 3000.0, film)
+    table = build_pupil_table(lens, f, film.half_diagonal_mm) if with_table else None
+    depths = [m.centre_z_mm + d for d in (300.0, 2000.0, 2900.0, 1e5, 1e7)]
+    fast = measure_model_error(lens, f, m, film, depths, pupil_table=table)
+    slow = measure_model_error_reference(lens, f, m, film, depths, pupil_table=table)
+    assert fast.keys() == slow.keys()
+    for k in fast:
+        np.testing.assert_allclose(np.asarray(fast[k], float), np.asarray(slow[k], float),
+                                   rtol=1e-9, atol=1e-9, err_msg=k)
+        assert np.all(np.isfinite(np.asarray(fast[k], float))), k
