@@ -307,8 +307,13 @@ def start_render(
     end_col: int | None = None,
     library_paths: Iterable[str | os.PathLike] = (),
     timeout: float | None = None,
+    nice: int = 0,
 ) -> "RenderJob":
     """Start the render :func:`render` describes and return at once.
+
+    ``nice`` > 0 lowers the process's scheduling priority (``os.nice``): a render
+    started on a guess yields the cores to the work that decides whether it is
+    needed.
 
     POV-Ray 3.7 spends most of a small render's wall time idle (~0.6 s per
     process, a few ms of CPU), so independent renders are best started together
@@ -365,6 +370,7 @@ def start_render(
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL,
                 stderr=err,
+                preexec_fn=(lambda: os.nice(nice)) if nice > 0 else None,
             )
         except FileNotFoundError:
             raise PovrayError(

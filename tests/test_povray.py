@@ -194,3 +194,16 @@ def test_a_wrapper_script_is_never_judged_done_before_it_exits(tmp_path):
     proc.wait()
     assert not judged_early
     assert (tmp_path / "marker").exists()
+
+
+def test_start_render_can_lower_the_priority(tmp_path):
+    scene = tmp_path / "s.pov"
+    scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
+    job = povray.start_render(scene, tmp_path / "a.exr", 16, 12, nice=7)
+    try:
+        fields = open(f"/proc/{job.proc.pid}/stat").read().rsplit(")", 1)[1].split()
+        own = int(open("/proc/self/stat").read().rsplit(")", 1)[1].split()[16])
+        assert int(fields[16]) == min(19, own + 7)     # field 19 of stat: nice
+    finally:
+        job.wait()
+    assert (tmp_path / "a.exr").exists()

@@ -252,6 +252,7 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path):
                                       batch_size=None), quiet=True)
     assert plan["inputs"]["method"] == "mesh" and "provisional" not in plan["decision"]
     assert any("while the depth probe ran" in r for r in plan["decision"]["reasons"])
+    assert plan["decision"]["reasons"][-1].startswith("-> mesh")      # the conclusion stays last
     early = json.loads((auto / "samples" / "early.timing.json").read_text())
     n = plan["inputs"]["samples"]
     assert early["samples"] == 8 and n >= 8
