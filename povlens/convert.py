@@ -356,11 +356,13 @@ def convert(opts: ConvertOptions, render_early=None) -> dict:
     depend on the count, so those samples can be rendered while the depth probe
     runs: a provisional plan with that many samples is written to OUTDIR and
     ``render_early(plan, lens, table)`` is called (the stopped-down lens and its
-    exit-pupil table); it returns a handle with ``wait()`` (raises
-    what the render raised) and ``cancel()``.  After the decision the handle is
-    waited for (mesh: the final plan keeps the rendered samples) or cancelled
-    (another method; not expected, since the lens alone ruled the views out),
-    before the final plan is written.
+    exit-pupil table); it returns a handle with ``extend(plan)``, ``wait()``
+    (raises what the render raised) and ``cancel()``.  If the decision is mesh,
+    the handle is given the final plan (``extend``: it renders the samples that
+    plan adds in the same pipeline), the final plan is written (the rendered
+    samples stay: only the count changed) and the handle is waited for, so the
+    folder is rendered when this returns.  Otherwise (the guess was wrong) it is
+    cancelled.
     """
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
@@ -398,14 +400,13 @@ def convert(opts: ConvertOptions, render_early=None) -> dict:
             if early is not None:
                 early_n = early[0]["inputs"]["samples"]
                 if decision["method"] == "mesh":
-                    early[1].wait()
-                    _note(decision, 
-                        f"(lens samples 0..{early_n - 1} were rendered while the depth probe "
-                        f"ran: the lens alone ruled out the views)")
+                    _note(decision, f"(lens samples 0..{early_n - 1} were started while the "
+                                    f"depth probe ran: the lens alone ruled out the views)")
                 else:
                     early[1].cancel()
-                    _note(decision, "(the mesh render started while the probe ran "
-                                               "was stopped)")
+                    early = None
+                    _note(decision, "(the mesh render started while the probe ran was "
+                                    "stopped)")
         except BaseException:
             probe.cancel()
             if speculative is not None:
@@ -442,12 +443,25 @@ def convert(opts: ConvertOptions, render_early=None) -> dict:
         opts = dataclasses.replace(opts, samples=max(adaptive["band_samples"]))
     elif decision is not None:
         decision.pop("adaptive", None)
-    plan = make_plan(opts) if reuse is None else _finish_plan(opts, start, **reuse)[0]
-    if adaptive is not None:
-        _adaptive_batches(plan, adaptive, opts)
-    if decision is not None:
-        _mark_auto(plan, requested, decision)
-    _write_folder(out, plan)
+    try:
+        plan = make_plan(opts) if reuse is None else _finish_plan(opts, start, **reuse)[0]
+        if adaptive is not None:
+            _adaptive_batches(plan, adaptive, opts)
+        if decision is not None:
+            _mark_auto(plan, requested, decision)
+        if early is not None:
+            # the samples the final plan adds follow in the same pipeline; what the
+            # folder had rendered stays (only the count changed: _stale_samples)
+            early[1].extend(plan)
+        _write_folder(out, plan)
+        if early is not None:
+            early[1].wait()
+    except BaseException:
+        if early is not None:
+            early[1].cancel()
+        if speculative is not None:
+            speculative.cancel()
+        raise
     if decision is not None and speculative is not None:
         # the decision is the render already running: it becomes the folder's view
         try:
@@ -537,15 +551,20 @@ def _focal_blur_text(plan: dict, out: Path) -> str:
 
 def _lens_rules_out_views(opts: ConvertOptions, plan0: dict) -> bool:
     """The guess, before the depth probe is in, that --method auto will choose mesh:
-    distortion over the budget at the plan's standard depths, or vignetting that is
-    wanted and strong (relative illumination below
+    at the plan's standard depths (half, once, twice and ten times the focus
+    distance) the distortion, half the blur-size error or half the shape error
+    (:func:`povlens.auto_plan.decide`'s measures) is over the budget, or the
+    vignetting is wanted and strong (relative illumination below
     :data:`povlens.auto_plan.STRONG_VIGNETTING` somewhere in the frame).  Only
     work started early depends on it (:func:`convert`: the first lens samples, or
     else the focal_blur view); the decision itself waits for the probe."""
-    from .auto_plan import STRONG_VIGNETTING
+    from .auto_plan import STRONG_VIGNETTING, shape_error_px
     e = plan0["model_error"]
+    tol = opts.tolerance_px
+    shape = shape_error_px(np.asarray(e["blur_real_px"]), np.asarray(e["elongation"]))
     return bool((opts.vignetting and e["min_relative_illumination"] < STRONG_VIGNETTING)
-                or e["max_distortion_px"] >= opts.tolerance_px)
+                or e["max_distortion_px"] >= tol or e["max_blur_size_error_px"] / 2 >= tol
+                or float(np.max(shape)) / 2 >= tol)
 
 
 #: Scheduling priority (``nice``) of the focal_blur render started on a guess: it
@@ -640,16 +659,17 @@ def _invalidate_outputs(out: Path, stale: list[int] | None = None) -> None:
     """Inputs changed: drop what no longer belongs to the plan.  ``stale`` lists the
     lens samples to drop (None = every sample, and exposure.txt, which depends on
     the lens, focus and film); images, views and batch markers always go."""
-    # pupil.npz stays: load_if_current checks its inputs.
-    patterns = ["samples/*.done", "samples/*.timing.json", "samples/*.inc", "image.exr",
+    # pupil.npz stays: load_if_current checks its inputs.  A sample's mesh (.inc)
+    # goes with the sample: one still wanted may be in use by a running render.
+    patterns = ["samples/*.done", "samples/*.timing.json", "image.exr",
                 "image.png", "view-*.exr"]
     if stale is None:
-        patterns += ["samples/*.exr", "samples/*.blocked", "exposure.txt"]
+        patterns += ["samples/*.exr", "samples/*.blocked", "samples/*.inc", "exposure.txt"]
     for pattern in patterns:
         for f in out.glob(pattern):
             f.unlink()
     for k in stale or []:
-        for suffix in (".exr", ".weight.exr", ".blocked"):
+        for suffix in (".exr", ".weight.exr", ".blocked", ".inc"):
             (out / "samples" / f"sample_{k:04d}{suffix}").unlink(missing_ok=True)
 
 

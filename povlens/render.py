@@ -284,8 +284,8 @@ class _SampleRenders:
 
 
 def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: int,
-                   samples: list[int], points=None, in_flight: int = POVRAY_IN_FLIGHT,
-                   stop=None, on_done=None) -> dict:
+                   samples, points=None, in_flight: int = POVRAY_IN_FLIGHT,
+                   stop=None, on_done=None, plan_for=None) -> dict:
     """Trace, write and render lens samples ``samples`` of batch ``batch``, pipelined.
 
     For each sample in turn: trace its rays and write its mesh and weights
@@ -295,7 +295,10 @@ def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: 
     plan's exit-pupil table); ``points(k)`` overrides the plan's sample points
     (:mod:`povlens.bench`).  ``stop``: a :class:`threading.Event`; once set, no
     further sample starts and the running ones are stopped.  ``on_done()`` is called
-    as each sample is finished (progress).  Returns timings: {samples, blocked,
+    as each sample is finished (progress).  ``samples`` may be any iterable of
+    sample numbers (a generator that waits for more: :class:`_EarlyRender`), and
+    ``plan_for(k)`` the plan to trace sample k with (default ``plan``; plans that
+    differ only in the sample count give the same sample k).  Returns timings: {samples, blocked,
     rays_and_meshes_s (Python), povray_s (summed over the overlapping processes),
     wall_s}.
     """
@@ -304,14 +307,16 @@ def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: 
     t_mesh = 0.0
     blocked = 0
     queue = _SampleRenders(plan, outdir, batch, in_flight, on_done)
+    seen: list[int] = []
     try:
         for k in samples:
             if stop is not None and stop.is_set():
                 queue.abort()
                 break
+            seen.append(k)
             t = time.perf_counter()
-            ok = _write_mesh(plan, lens, sampler, outdir, k,
-                             points=None if points is None else points(k))
+            ok = _write_mesh(plan if plan_for is None else plan_for(k), lens, sampler, outdir,
+                             k, points=None if points is None else points(k))
             t_mesh += time.perf_counter() - t
             if ok:
                 queue.start(k)
@@ -325,9 +330,9 @@ def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: 
         queue.abort()
         raise
     finally:
-        for k in samples:
+        for k in seen:
             _sample_paths(outdir, k)[2].unlink(missing_ok=True)
-    return {"samples": len(samples), "blocked": blocked, "rays_and_meshes_s": t_mesh,
+    return {"samples": len(seen), "blocked": blocked, "rays_and_meshes_s": t_mesh,
             "povray_s": queue.povray_s, "wall_s": time.perf_counter() - t0}
 
 
@@ -473,40 +478,82 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
 
 
 class _EarlyRender:
-    """The lens samples of a provisional plan, rendered in a thread of this process
-    while :func:`povlens.convert.convert` goes on (its ``render_early``): the lens
-    and pupil table are already in memory.  ``wait()`` waits and raises what the
-    render raised, ``cancel()`` stops it (what it finished stays)."""
+    """Lens samples rendered in a thread of this process while
+    :func:`povlens.convert.convert` goes on (its ``render_early``): those of a
+    provisional plan at first, then, after :meth:`extend`, those the final plan
+    adds, without draining the POV-Ray pipeline in between.  The lens and pupil
+    table are already in memory.  :meth:`wait` waits for the samples given so far
+    and raises what the render raised; :meth:`cancel` stops it (what it finished
+    stays)."""
 
     def __init__(self, outdir: Path, plan: dict, lens, table, in_flight: int, quiet: bool):
         import threading
+        self._outdir = Path(outdir)
         self._stop = threading.Event()
+        self._more = threading.Condition()
+        self._closed = False
         self._error: BaseException | None = None
-        self._thread = threading.Thread(
-            target=self._run, args=(Path(outdir), plan, lens, table, in_flight, quiet),
-            daemon=True)
+        self._plans = {k: plan for k in range(plan["inputs"]["samples"])}
+        self._todo = [k for k in range(plan["inputs"]["samples"])
+                      if not _sample_done(self._outdir, k)]
+        self._final = plan
+        self._bar = _progress(len(self._todo), "lens samples", quiet)
+        self._thread = threading.Thread(target=self._run, args=(lens, table, in_flight),
+                                        daemon=True)
         self._thread.start()
 
-    def _run(self, outdir, plan, lens, table, in_flight, quiet):
+    def _samples(self):
+        i = 0
+        while True:
+            with self._more:
+                while i >= len(self._todo) and not self._closed and not self._stop.is_set():
+                    self._more.wait(0.05)
+                if i >= len(self._todo) or self._stop.is_set():
+                    return
+                k = self._todo[i]
+            i += 1
+            yield k
+
+    def _run(self, lens, table, in_flight):
         try:
-            todo = [k for k in range(plan["inputs"]["samples"]) if not _sample_done(outdir, k)]
-            if todo:
-                with _progress(len(todo), "lens samples (while probing)", quiet) as bar:
-                    timing = render_samples(plan, lens, table, outdir, 0, todo,
-                                            in_flight=in_flight, stop=self._stop,
-                                            on_done=lambda: bar.update(1))
-                write_text(outdir / "samples" / "early.timing.json", json.dumps(timing) + "\n")
-            _mark_batches_done(outdir, plan)
+            timing = render_samples(self._final, lens, table, self._outdir, 0, self._samples(),
+                                    in_flight=in_flight, stop=self._stop,
+                                    on_done=lambda: self._bar.update(1),
+                                    plan_for=lambda k: self._plans[k])
+            if timing["samples"]:
+                write_text(self._outdir / "samples" / "early.timing.json",
+                           json.dumps(timing) + "\n")
+            if not self._stop.is_set():
+                _mark_batches_done(self._outdir, self._final)
         except BaseException as e:      # handed to wait()
             self._error = e
+        finally:
+            self._bar.close()
+
+    def extend(self, plan: dict) -> None:
+        """Render also the samples ``plan`` (the final plan, more samples than the
+        provisional one) adds."""
+        with self._more:
+            new = [k for k in range(plan["inputs"]["samples"]) if k not in self._plans]
+            self._plans.update({k: plan for k in new})
+            self._todo += [k for k in new if not _sample_done(self._outdir, k)]
+            self._final = plan
+            self._bar.total = len(self._todo)
+            self._bar.refresh()
+            self._more.notify_all()
 
     def wait(self) -> None:
+        with self._more:
+            self._closed = True
+            self._more.notify_all()
         self._thread.join()
         if self._error is not None:
             raise self._error
 
     def cancel(self) -> None:
         self._stop.set()
+        with self._more:
+            self._more.notify_all()
         self._thread.join()
 
 

@@ -242,26 +242,52 @@ def test_more_samples_reuse_the_rendered_ones(tmp_path):
     assert not list(s.glob("sample_*.exr")) and not (out / "exposure.txt").exists()
 
 
-def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path):
+@pytest.mark.parametrize("focus, film_mm, tol", [(4.0, 35.0, 0.5), (1.5, 14.0, 0.2)])
+def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, focus, film_mm,
+                                                                     tol):
     """dgauss.50mm vignettes (relative illumination ~0.33): the lens alone rules out
     the views, so povlens render starts lens samples 0..7 while the depth probe
-    runs.  The result equals a fixed mesh render of the decided sample count."""
+    runs, and the samples the decision adds follow in the same pipeline (focus
+    1.5 m on a 14 mm film: several pixels of blur, more than 8 samples).  The
+    result equals a fixed mesh render of the decided sample count."""
     from povlens.render import convert_and_render
     auto = tmp_path / "auto"
+    kw = dict(focus=focus, film_diagonal_mm=film_mm, batch_size=None)
     plan, _ = convert_and_render(opts(tmp_path, outdir=str(auto), method="auto",
-                                      batch_size=None), quiet=True)
+                                      tolerance_px=tol, **kw), quiet=True)
     assert plan["inputs"]["method"] == "mesh" and "provisional" not in plan["decision"]
     assert any("while the depth probe ran" in r for r in plan["decision"]["reasons"])
     assert plan["decision"]["reasons"][-1].startswith("-> mesh")      # the conclusion stays last
-    early = json.loads((auto / "samples" / "early.timing.json").read_text())
     n = plan["inputs"]["samples"]
-    assert early["samples"] == 8 and n >= 8
+    assert (n > 8) == (focus == 1.5)
+    early = json.loads((auto / "samples" / "early.timing.json").read_text())
+    assert early["samples"] == n                     # all of them, in the one pipeline
+    assert not (auto / "samples" / "render.timing.json").exists()
     fixed = tmp_path / "fixed"
-    convert(opts(tmp_path, outdir=str(fixed), method="mesh", samples=n, batch_size=None))
+    convert(opts(tmp_path, outdir=str(fixed), method="mesh", samples=n, **kw))
     render_outdir(fixed, quiet=True)
     np.testing.assert_array_equal(read_image(auto / "image.exr"), read_image(fixed / "image.exr"))
     r = subprocess.run(["make", "-C", str(auto)], capture_output=True, text=True)
     assert r.returncode == 0 and "Nothing to be done" in r.stdout
+    assert not list((auto / "samples").glob("*.inc")) and not list((auto / "samples").glob(".s*"))
+
+
+def test_a_wrong_guess_stops_the_early_samples_and_renders_the_decision(tmp_path, monkeypatch):
+    """The guess that the lens rules out the views is forced for telephoto.250mm,
+    which auto renders with focal_blur: the early samples are stopped and dropped,
+    and the folder holds the focal_blur image."""
+    import povlens.convert as conv
+    from povlens.render import convert_and_render
+    monkeypatch.setattr(conv, "_lens_rules_out_views", lambda opts, plan0: True)
+    out = tmp_path / "auto"
+    plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto",
+                                          lens="telephoto.250mm", batch_size=None), quiet=True)
+    assert plan["inputs"]["method"] == "focal-blur"
+    assert any("mesh render started while the probe ran was stopped" in r
+               for r in plan["decision"]["reasons"])
+    assert image.exists() and read_image(image).shape[:2] == (36, 48)
+    assert _processes_in(out / "samples") == []
+    assert not list((out / "samples").glob("sample_*"))
 
 
 def test_a_cancelled_early_render_leaves_no_povray_and_resumes(tmp_path):
