@@ -31,6 +31,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import io
+import json
 import os
 import re
 import shlex
@@ -137,8 +138,56 @@ def find_povray() -> str:
     return os.path.abspath(found)
 
 
+def _version_cache_path() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "povlens" / "povray-version.json"
+
+
+def _binary_key(executable: str) -> str | None:
+    """Identity of an executable file for the version cache: its real path, inode,
+    size and modification time.  None for scripts (a wrapper's POV-Ray may change
+    while the wrapper does not) and for what cannot be read."""
+    try:
+        real = os.path.realpath(executable)
+        with open(real, "rb") as f:
+            if f.read(4) != b"\x7fELF":
+                return None
+        st = os.stat(real)
+    except OSError:
+        return None
+    return f"{real}:{st.st_ino}:{st.st_size}:{st.st_mtime_ns}"
+
+
 @functools.lru_cache(maxsize=None)
 def _version_of(executable: str) -> str:
+    """POV-Ray's version, remembered across runs in the user's cache folder
+    (``$XDG_CACHE_HOME/povlens/povray-version.json``): ``povray --version`` takes
+    ~0.2 s, mostly idle start-up, on every conversion otherwise.  The entry is
+    keyed by the binary's path, inode, size and mtime, so an upgrade asks again."""
+    key = _binary_key(executable)
+    cache = _version_cache_path()
+    known: dict = {}
+    if key is not None:
+        try:
+            known = json.loads(cache.read_text())
+            if isinstance(known.get(key), str):
+                return known[key]
+        except (OSError, ValueError, AttributeError):
+            known = {}
+    version = _ask_version(executable)
+    if key is not None:
+        try:
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            tmp = cache.with_name(f".{cache.name}.{os.getpid()}")
+            tmp.write_text(json.dumps({**(known if isinstance(known, dict) else {}),
+                                       key: version}) + "\n")
+            os.replace(tmp, cache)
+        except OSError:
+            pass                     # no cache folder: ask again next time
+    return version
+
+
+def _ask_version(executable: str) -> str:
     try:
         proc = subprocess.run(
             [executable, "--version"],

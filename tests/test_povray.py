@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import os
 import shutil
 
 import numpy as np
@@ -207,3 +208,32 @@ def test_start_render_can_lower_the_priority(tmp_path):
     finally:
         job.wait()
     assert (tmp_path / "a.exr").exists()
+
+
+def test_version_is_remembered_across_runs_and_asked_again_after_an_upgrade(tmp_path,
+                                                                           monkeypatch):
+    """The version cache: a second process (lru_cache cleared) does not run POV-Ray;
+    a binary that changes (another mtime: an upgrade) is asked again; a script is
+    never cached (its POV-Ray may change behind it)."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    real = shutil.which("povray")
+    binary = tmp_path / "povray"
+    shutil.copy(real, binary)                          # an ELF binary we can touch
+    calls = []
+    ask = povray._ask_version
+    monkeypatch.setattr(povray, "_ask_version", lambda exe: calls.append(exe) or ask(exe))
+    povray._version_of.cache_clear()
+    v = povray.povray_version(str(binary))
+    povray._version_of.cache_clear()
+    assert povray.povray_version(str(binary)) == v and len(calls) == 1
+    os.utime(binary, ns=(0, 10**18))                   # "upgraded"
+    povray._version_of.cache_clear()
+    assert povray.povray_version(str(binary)) == v and len(calls) == 2
+    script = tmp_path / "wrap"
+    script.write_text(f'#!/bin/sh\nexec "{real}" "$@"\n')
+    script.chmod(0o755)
+    for _ in range(2):
+        povray._version_of.cache_clear()
+        assert povray.povray_version(str(script)) == v
+    assert len(calls) == 4
+    povray._version_of.cache_clear()
