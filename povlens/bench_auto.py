@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .auto_plan import shift_rmse
 from .bench import ROOT, rmse
 from .convert import ConvertOptions
 from .images import read_image
@@ -84,23 +85,6 @@ class AutoRow:
     seconds: float
     rmse: float
     chosen: str = ""     # auto: the method it chose
-
-
-def shift_rmse(reference: np.ndarray, shift_px: float) -> float:
-    """Mean over +-x, +-y of the RMSE between ``reference`` (H, W, C) and itself moved
-    by ``shift_px`` (< 1) pixels, linear interpolation, one-pixel border excluded."""
-    a = np.asarray(reference, np.float64)[..., :3]
-    s = float(shift_px)
-    if not 0 < s < 1:
-        raise ValueError("shift_px must be in (0, 1)")
-    core = a[1:-1, 1:-1]
-    out = []
-    for axis in (0, 1):
-        for step in (1, -1):
-            moved = (1 - s) * a + s * np.roll(a, step, axis=axis)
-            d = moved[1:-1, 1:-1] - core
-            out.append(math.sqrt(float(np.mean(d * d))))
-    return float(np.mean(out))
 
 
 def corrected_rmse(measured: float, reference_noise: float) -> float:

@@ -180,7 +180,7 @@ def test_vignetting_and_shift_rmse_on_simple_images():
     step = np.zeros((10, 20, 3))
     step[:, 10:] = 1.0
     f = 0.25
-    per_x = math.sqrt(f ** 2 / 19)                            # 1 of 19 compared columns
+    per_x = math.sqrt(f ** 2 / 18)                            # 1 of 18 compared columns
     assert shift_rmse(step, f) == pytest.approx((2 * per_x + 0 + 0) / 4)
     # ramp: every pixel changes by slope x shift
     ramp = np.tile(np.arange(20.0)[None, :, None], (10, 1, 3)) * 0.01

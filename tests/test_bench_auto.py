@@ -21,8 +21,11 @@ def test_shift_rmse_of_a_step_edge():
     want = (2 * math.sqrt(s * s / core.shape[1]) + 0.0 + 0.0) / 4
     assert shift_rmse(img, s) == pytest.approx(want)
     assert shift_rmse(img, 0.25) < shift_rmse(img, 0.5)
+    # 1.5 px: two columns change, by 0.5 and by 1; a 2 px border is left out
+    want = (2 * math.sqrt((0.5 ** 2 + 1.0) / 8) + 0.0 + 0.0) / 4
+    assert shift_rmse(img, 1.5) == pytest.approx(want)
     with pytest.raises(ValueError):
-        shift_rmse(img, 1.5)
+        shift_rmse(img, -1.0)
 
 
 def test_time_at_error():
