@@ -86,12 +86,16 @@ MIN_SAMPLES, MAX_SAMPLES = 8, 256
 #: focal_blur settings of --method auto: POV-Ray's adaptive sampling (at least
 #: ``min`` samples per pixel, more until the confidence / variance test passes, at
 #: most ``max``).  Sharp pixels stop at the minimum, so no depth-dependent count is
-#: needed and the render can start while the depth probe runs.  Measured with
-#: ``povlens bench --auto`` (160x120, 256-sample mesh reference, noise-corrected
-#: RMSE; benchmarks/results/auto*.txt): on paper.pov / telephoto.250mm ``8, 256``
-#: with confidence 0.95, variance 1/1000 gave 0.79 s / 0.0093, over the 0.0072
-#: budget; these settings 1.30 s / 0.0065 (fixed ``256, 256``: 1.91 s / 0.0064).
-FOCAL_BLUR_ADAPTIVE = {"min": 16, "max": 256, "confidence": 0.99, "variance": 1.0 / 10000}
+#: needed and the render can start while the depth probe runs.  Chosen on the seven
+#: bundled scene / lens pairs auto renders with focal_blur (160x120, against the
+#: 256-sample mesh references of ``povlens bench --auto``, noise-corrected RMSE,
+#: POV-Ray time, fastest of 2 runs), by the time fixed ``blur_samples N, N``
+#: (N = 32, 64, 128) needs for the same RMSE: ``32, 256`` took 0.65-0.82 of it on
+#: all seven (chart.pov / tessar.50mm 0.85 s at RMSE 0.173, where fixed needs
+#: ~1.09 s), ``16, 256`` 0.67-1.27 (chart / tessar 0.80 s at 0.206 against ~0.63 s),
+#: and confidence 0.99 / variance 1/1000 missed the budget on paper.pov /
+#: telephoto.250mm (RMSE 0.0084 against 0.0072; these settings 0.0064).
+FOCAL_BLUR_ADAPTIVE = {"min": 32, "max": 256, "confidence": 0.99, "variance": 1.0 / 10000}
 #: Without the probe's image (:func:`decide` without ``image_error``): relative
 #: illumination below 1 - this counts as vignetting focal_blur cannot render.
 VIGNETTING_TOLERANCE = 0.05

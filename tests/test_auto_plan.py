@@ -117,7 +117,7 @@ def test_speculative_focal_blur_is_the_final_view(tmp_path):
     plan = convert(ConvertOptions(outdir=str(spec), speculate=True, **base))
     assert plan["inputs"]["method"] == "focal-blur"
     assert (spec / "view-focal-blur.exr").exists()          # rendered during convert
-    assert "blur_samples 16, 256" in (spec / "focal_blur.pov").read_text()
+    assert "blur_samples 32, 256" in (spec / "focal_blur.pov").read_text()
     assert not list(spec.glob(".speculative*")) and not list(spec.glob(".*.tmp*"))
     render_outdir(spec, quiet=True)
     plain = tmp_path / "plain"
