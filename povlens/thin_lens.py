@@ -167,6 +167,26 @@ def fit_thin_lens(lens: LensPrescription, film_distance_mm: float, focus_z_mm: f
                               rms if math.isfinite(rms) else -1.0)
 
 
+def _bundle_geometry(lens, film_distance_mm, model, film, object_z_mm, n_field, n_rings):
+    """What both model-error measurements share: pixel pitch, depths (D,), film
+    heights (F,), the diagonal direction, the pupil disc points (M, 2), the
+    entrance-pupil plane z, and per film height where the real chief ray crosses
+    that plane (F, 2) (the film point lies along -diagonal)."""
+    pitch = film.pixel_pitch_mm
+    depths = np.atleast_1d(np.asarray(object_z_mm, dtype=np.float64))
+    hs = np.linspace(0.0, film.half_diagonal_mm, n_field)
+    diag_dir = np.array([film.width_mm, film.height_mm]) / math.hypot(film.width_mm, film.height_mm)
+    disc = pupil_disc_points(n_rings) * (0.75 * model.pupil_diameter_mm)
+    ep_z = model.centre_z_mm
+    chief, found = chief_rays(lens, film_distance_mm, hs)
+    with np.errstate(all="ignore"):
+        t = (ep_z - chief.origin_mm[:, 2]) / chief.direction[:, 2]
+        x_c = chief.origin_mm[:, 0] + t * chief.direction[:, 0]
+    x_c = np.where(found & np.isfinite(x_c), x_c, 0.0)
+    centres = -x_c[:, None] * diag_dir[None, :]
+    return pitch, depths, hs, diag_dir, disc, ep_z, centres
+
+
 def measure_model_error(lens: LensPrescription, film_distance_mm: float,
                         model: EquivalentThinLens, film: Film, object_z_mm,
                         n_field: int = 9, n_rings: int = 12, pupil_table=None) -> dict:
@@ -192,19 +212,9 @@ def measure_model_error(lens: LensPrescription, film_distance_mm: float,
     time and gives the same numbers.  Returns a dict of per-(depth, field) arrays
     (D, F) and their maxima, in pixels.
     """
-    pitch = film.pixel_pitch_mm
-    depths = np.atleast_1d(np.asarray(object_z_mm, dtype=np.float64))
-    hs = np.linspace(0.0, film.half_diagonal_mm, n_field)
-    diag_dir = np.array([film.width_mm, film.height_mm]) / math.hypot(film.width_mm, film.height_mm)
-    disc = pupil_disc_points(n_rings) * (0.75 * model.pupil_diameter_mm)
+    pitch, depths, hs, diag_dir, disc, ep_z, centres = _bundle_geometry(
+        lens, film_distance_mm, model, film, object_z_mm, n_field, n_rings)
     m = len(disc)
-    ep_z = model.centre_z_mm
-    chief, found = chief_rays(lens, film_distance_mm, hs)
-    with np.errstate(all="ignore"):
-        t = (ep_z - chief.origin_mm[:, 2]) / chief.direction[:, 2]
-        x_c = chief.origin_mm[:, 0] + t * chief.direction[:, 0]
-    x_c = np.where(found & np.isfinite(x_c), x_c, 0.0)
-    centres = -x_c[:, None] * diag_dir[None, :]               # (F, 2)
     nd, nf = len(depths), n_field
     target_film = -hs[:, None] * diag_dir[None, :]            # (F, 2) model image points
     tan = -target_film / model.image_distance_mm              # (F, 2)
@@ -258,39 +268,12 @@ def measure_model_error_reference(lens: LensPrescription, film_distance_mm: floa
                         model: EquivalentThinLens, film: Film, object_z_mm,
                         n_field: int = 9, n_rings: int = 12, pupil_table=None) -> dict:
     """:func:`measure_model_error` one bundle at a time (the slow, obvious
-    reference its vectorized form is tested against).
-
-    For object points at depths ``object_z_mm`` (camera-frame z) placed where
-    the model images them at film heights 0..half diagonal (along the diagonal
-    direction), traces a bundle to the film and compares with the model.  The
-    bundle fills a disc of 1.5 x the entrance-pupil diameter on the pupil plane,
-    centred where the real chief ray of that film height crosses it (the real
-    pupil moves off axis with the field); rays the lens blocks are dropped.
-
-    * distortion: centroid of the real spot vs the model's image point (pixels);
-    * blur size: real equivalent-disc diameter (2 sqrt(2) x RMS radius) vs the
-      model's blur-disc diameter (pixels);
-    * blur shape: elongation sqrt(l_max / l_min) of the spot's covariance;
-    * vignetting: relative illumination E(h) / E(0) from ``pupil_table``
-      (:class:`povlens.pupil.PupilTable`, exact) when given, else the passing
-      fraction of the bundle relative to the axis.
-
+    reference its vectorized form is tested against): same arguments, same result.
     Returns a dict of per-(depth, field) arrays and their maxima, in pixels.
     """
-    pitch = film.pixel_pitch_mm
-    depths = np.atleast_1d(np.asarray(object_z_mm, dtype=np.float64))
-    hs = np.linspace(0.0, film.half_diagonal_mm, n_field)
-    diag_dir = np.array([film.width_mm, film.height_mm]) / math.hypot(film.width_mm, film.height_mm)
-    disc = pupil_disc_points(n_rings) * (0.75 * model.pupil_diameter_mm)
+    pitch, depths, hs, diag_dir, disc, ep_z, centres = _bundle_geometry(
+        lens, film_distance_mm, model, film, object_z_mm, n_field, n_rings)
     m = len(disc)
-    ep_z = model.centre_z_mm
-    # Where the real chief ray of each film height crosses the entrance-pupil plane.
-    chief, found = chief_rays(lens, film_distance_mm, hs)
-    with np.errstate(all="ignore"):
-        t = (ep_z - chief.origin_mm[:, 2]) / chief.direction[:, 2]
-        x_c = chief.origin_mm[:, 0] + t * chief.direction[:, 0]
-    x_c = np.where(found & np.isfinite(x_c), x_c, 0.0)
-    centres = -x_c[:, None] * diag_dir[None, :]   # the film point lies along -diag_dir
     relative_illumination = None
     if pupil_table is not None:
         e = np.asarray(pupil_table.irradiance_factor(hs), dtype=np.float64)
