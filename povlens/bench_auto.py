@@ -285,6 +285,11 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
                              num.get("max_blur_size_error_px", math.nan),
                              num.get("max_shape_error_px", math.nan),
                              num.get("min_relative_illumination", math.nan)))
+            if "image_vignetting_rmse" in num:
+                lines.append("      (the decision compares half the blur size and shape errors "
+                             "with the tolerance); vignetting's image RMSE {:.3g} against "
+                             "{:.3g} for a tolerance move".format(
+                                 num["image_vignetting_rmse"], num["image_shift_rmse"]))
         if info.get("adaptive"):
             a = info["adaptive"]
             lines.append(f"      adaptive: {a.get('pixel_samples')} pixel-samples instead of "
