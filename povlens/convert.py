@@ -9,9 +9,8 @@
 * ``pinhole.pov`` and ``focal_blur.pov`` — wrappers that ``#include`` the scene
   and declare their own camera last (POV-Ray uses the last camera);
 * for the mesh method, ``samples/batch_NNN.pov`` wrappers that render one lens
-  sample each per POV-Ray run (the sample's ray mesh is written by the render
-  worker of batch NNN, :mod:`povlens.render`) and ``pupil.npz``, the exit-pupil
-  table;
+  sample each per POV-Ray run (the sample's ray mesh is written just before,
+  :mod:`povlens.render`) and ``pupil.npz``, the exit-pupil table;
 * ``Makefile`` — ``make -C OUTDIR -j2`` renders and composites; a second
   ``make`` does nothing.
 
@@ -247,8 +246,8 @@ def _finish_plan(opts: ConvertOptions, st: _PlanStart, *, pupil_table=None, mode
 
     version = version()
     rw, rh, drop = render_size(film.width_px, film.height_px, version)
-    # A batch is the work of one render worker (each of its samples is its own
-    # POV-Ray process).  By default, one batch per core.  Samples are dealt
+    # A batch is the work of one 'povlens render-batch' (make runs them in parallel;
+    # each sample is its own POV-Ray process).  By default, one batch per core.  Samples are dealt
     # round-robin, so the samples a plan with fewer samples rendered first
     # (0..n-1: the same for any count) are spread evenly over the batches.
     bs = opts.batch_size or math.ceil(opts.samples / (os.cpu_count() or 1))

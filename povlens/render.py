@@ -5,9 +5,10 @@ so an interrupted run never leaves a half-written file at a final name):
 
 * batch b of the mesh method -> ``samples/sample_KKKK.exr`` (POV-Ray, linear),
   ``samples/sample_KKKK.weight.exr`` (per-pixel radiometric weights, float32),
-  then the marker ``samples/batch_BBB.done``.  A batch's worker traces and
-  writes one sample's ray mesh (``sample_KKKK.inc``) at a time and starts a
-  POV-Ray process for it while it goes on to the next (several in flight, see
+  then the marker ``samples/batch_BBB.done`` (make's target; ``povlens render``
+  renders every sample in one process and writes the markers after).  Samples are
+  traced one at a time: the ray mesh (``sample_KKKK.inc``) is written and a
+  POV-Ray process started for it while the next is traced (several in flight, see
   :data:`POVRAY_IN_FLIGHT`); each mesh is deleted when its render ends.
 * a view (``pinhole`` / ``focal-blur``) -> ``view-<name>.exr``.
 * composite -> ``image.exr`` (linear float) and ``image.png`` (sRGB preview).
@@ -185,11 +186,12 @@ def _row_args(plan: dict, rows: tuple[int, int] | None) -> list[str]:
     return args
 
 
-#: POV-Ray processes one render worker keeps running at once.  Each POV-Ray run
+#: POV-Ray processes in flight per core (``render_outdir``) or per batch
+#: (``povlens render-batch``, make runs one per job).  Each POV-Ray run
 #: spends ~0.6 s of wall time idle (start-up and frame hand-over; user CPU ~0.01 s,
 #: povray-mesh-camera.md §10.3): measured here, 8 tiny renders take 5.5 s one
 #: after another and 0.72 s as 8 parallel processes.  So every lens sample is its
-#: own POV-Ray process, several in flight per worker, and the idle time of one
+#: own POV-Ray process, several in flight, and the idle time of one
 #: overlaps the parse and trace of the others.
 POVRAY_IN_FLIGHT = 4
 
