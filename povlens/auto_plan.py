@@ -28,7 +28,11 @@ The choice is made from measurements, not guesses:
      further); blur shape, half of how far the real spot's long axis reaches
      beyond the equivalent disc (:func:`shape_error_px`, half on each side); and
      vignetting (POV-Ray's focal_blur has none), judged in image terms (below);
-   * ``mesh`` otherwise.
+   * ``mesh`` otherwise; and also when the thin lens would do but leaving out the
+     vignetting alone takes :data:`VIGNETTING_FLOOR_SHARE` of the budget or more
+     while the blur needs only the minimum mesh sample count: focal_blur's error
+     cannot go below that floor, and a minimum mesh render costs about what the
+     adaptive focal blur does.
 
    **Vignetting in image terms.**  Vignetting is not a displacement, so it is
    judged by its effect on this scene's image: the probe also renders the view
@@ -50,10 +54,12 @@ The choice is made from measurements, not guesses:
    apart.  The target noise is that these copies are at most
    :data:`SAMPLE_SPACING_PX` (1 pixel) apart, so they blend instead of showing
    as separate copies / structured noise:
-   ``N = clamp(ceil(K b_max^2), 8, 256)`` with ``K = (pi/4) / SAMPLE_SPACING_PX^2``
-   and b_max the largest blur in pixels (real or model) over the depth range.
+   ``N = ceil(K b_max^2)`` with ``K = (pi/4) / SAMPLE_SPACING_PX^2`` and b_max
+   the largest blur in pixels (real or model) over the depth range, rounded to
+   the nearest power of two (the Sobol lens samples are balanced in blocks of
+   2^m) and clamped to 8..256 (:func:`samples_for_blur`).
    Pinhole renders use 1 sample.  A chosen focal_blur uses POV-Ray's adaptive
-   sampling instead (:data:`FOCAL_BLUR_ADAPTIVE`: 8 to 256 samples per pixel,
+   sampling instead (:data:`FOCAL_BLUR_ADAPTIVE`: 32 to 256 samples per pixel,
    stopping when POV-Ray's confidence test passes), which needs no
    depth-dependent count, so ``povlens render`` can start it while the probe
    runs (:func:`povlens.convert.convert`, ``speculate``).
@@ -76,13 +82,29 @@ __all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "shape_error_px", "vignetting_rmse",
            "probe_image_error", "film_radius_map_mm", "real_blur_at", "real_blur_model_error", "blur_range_px", "measure_depth_range", "choose_method", "adaptive_rows",
            "measure_depth_map", "start_depth_probe", "probe_axial_mm", "sample_row_ranges",
            "model_depths", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "VIGNETTING_TOLERANCE",
-           "STRONG_VIGNETTING"]
+           "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE", "samples_for_blur", "SAMPLE_RULE"]
 
 #: Largest spacing in pixels between the film copies of one blurred point (target noise).
 SAMPLE_SPACING_PX = 1.0
 #: Samples per squared pixel of blur diameter: (pi/4) / spacing^2.
 SAMPLE_K = (math.pi / 4) / SAMPLE_SPACING_PX ** 2
 MIN_SAMPLES, MAX_SAMPLES = 8, 256
+SAMPLE_RULE = (f"N = ceil({SAMPLE_K:.3g} b^2) rounded to the nearest power of two, "
+               f"{MIN_SAMPLES}..{MAX_SAMPLES}")
+#: Share of the error budget (image RMSE of a ``--tolerance`` move) that leaving
+#: out the vignetting may take before :func:`decide` prefers a mesh render of the
+#: minimum sample count to a focal_blur the thin lens would otherwise allow.  No
+#: focal_blur sample count brings its error below that floor, and a mesh render of
+#: :data:`MIN_SAMPLES` costs about what the adaptive focal blur does (paper.pov,
+#: 160x120: 1.12-1.14 s against 1.04-1.16 s).  Measured on the bundled scenes
+#: (benchmarks/results/auto.*; probe share in brackets): where the mesh render
+#: was better at equal time, paper.pov with cooke.triplet.50mm (0.76) and
+#: tessar.50mm (0.99), 8 mesh samples reached RMSE 0.027 / 0.027 against the
+#: focal_blur floor of 0.033 / 0.042; where focal_blur was better, chart.pov with
+#: cooke.triplet.50mm (0.32) and tessar.50mm (0.41), 8 mesh samples left 0.18 /
+#: 0.18 against focal_blur's 0.146 / 0.173 (the chart's fine texture needs the
+#: focal blur's many samples per pixel as anti-aliasing).
+VIGNETTING_FLOOR_SHARE = 0.6
 #: focal_blur settings of --method auto: POV-Ray's adaptive sampling (at least
 #: ``min`` samples per pixel, more until the confidence / variance test passes, at
 #: most ``max``).  Sharp pixels stop at the minimum, so no depth-dependent count is
@@ -109,6 +131,25 @@ PROBE_WIDTH = 64
 NEAR_PERCENTILE, FAR_PERCENTILE = 1.0, 99.0
 #: Far is infinity when more than this fraction of the probe's pixels see background.
 BACKGROUND_FRACTION = 0.01
+
+
+def samples_for_blur(blur_px: float, n_min: int = MIN_SAMPLES, n_max: int = MAX_SAMPLES) -> int:
+    """Lens samples for a largest blur of ``blur_px`` pixels: ``ceil(SAMPLE_K b^2)``
+    (copies of a blurred point at most :data:`SAMPLE_SPACING_PX` apart), rounded to
+    the nearest power of two (in log2) and clamped to ``[n_min, n_max]``.
+
+    Powers of two because the lens samples are a scrambled Sobol sequence
+    (:mod:`povlens.sampling`), whose points are balanced only in blocks of 2^m: a
+    count between two powers stratifies no better than the lower power.
+    Measured (paper.pov, the 100 mm dgauss table, 160x120): 42 samples reached RMSE
+    0.0136, where 32 and 64 reached 0.0150 and 0.0102, which is what about 38
+    samples would reach interpolating between them."""
+    b = float(blur_px)
+    k = SAMPLE_K * b * b if abs(b) < 1e9 else math.inf
+    if not math.isfinite(k) or k > n_max:
+        return int(max(n_min, n_max))
+    n = 2 ** round(math.log2(max(1, math.ceil(k))))
+    return int(min(n_max, max(n_min, n)))
 
 
 def blur_range_px(model, near_z_mm: float, far_z_mm: float, pixel_pitch_mm: float) -> dict:
@@ -246,7 +287,7 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
         reasons.append("-> pinhole: every deviation from a sharp pinhole view is under the budget")
         return {"method": "pinhole", "samples": 1, "reasons": reasons, "numbers": numbers}
     b_max = max(blur["max_px"], max_real)
-    samples = int(min(MAX_SAMPLES, max(MIN_SAMPLES, math.ceil(SAMPLE_K * b_max ** 2))))
+    samples = samples_for_blur(b_max)
     numbers["max_blur_px"] = b_max
     fb = [check("focal-blur: max distortion", dist, tol),
           check("focal-blur: max blur size error / 2 (the rim moves by half the diameter "
@@ -254,6 +295,18 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
           check("focal-blur: max blur shape error / 2 (the long axis reaches beyond the "
                 "disc by half on each side)", shape_err / 2, tol)]
     reasons.append("focal-blur: " + vig_text)
+    floor_share = 0.0
+    if image_error is not None and vignetting and image_error["shift_rmse"] > 0:
+        floor_share = image_error["vignetting_rmse"] / image_error["shift_rmse"]
+    numbers["vignetting_floor_share"] = floor_share
+    if all(fb) and vig_ok and samples == MIN_SAMPLES and floor_share >= VIGNETTING_FLOOR_SHARE:
+        reasons.append(
+            f"-> mesh: the equivalent thin lens is within the budget, but leaving out the "
+            f"vignetting alone uses {floor_share:.2f} of it (>= {VIGNETTING_FLOOR_SHARE:g}: no "
+            f"focal_blur sample count goes below that error), and the {b_max:.3g} px blur "
+            f"needs only the minimum {MIN_SAMPLES} lens samples, which cost about what the "
+            f"adaptive focal blur does, without the floor")
+        return {"method": "mesh", "samples": samples, "reasons": reasons, "numbers": numbers}
     if all(fb) and vig_ok:
         fb_settings = dict(FOCAL_BLUR_ADAPTIVE)
         numbers["blur_rule_samples"] = samples
@@ -261,13 +314,12 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
                        f"adaptive focal blur, {fb_settings['min']} to {fb_settings['max']} "
                        f"samples per pixel (confidence {fb_settings['confidence']:g}, variance "
                        f"{fb_settings['variance']:g}): sharp pixels stop at the minimum, the "
-                       f"{b_max:.3g} px blur would need {samples} fixed samples "
-                       f"(N = ceil({SAMPLE_K:.3g} b^2))")
+                       f"{b_max:.3g} px blur would need {samples} mesh samples "
+                       f"({SAMPLE_RULE})")
         return {"method": "focal-blur", "samples": fb_settings["max"],
                 "focal_blur": fb_settings, "reasons": reasons, "numbers": numbers}
     reasons.append(f"-> mesh: the real lens deviates from the equivalent thin lens beyond the "
-                   f"budget; {samples} samples for a {b_max:.3g} px blur "
-                   f"(N = ceil({SAMPLE_K:.3g} b^2), clamped to {MIN_SAMPLES}..{MAX_SAMPLES})")
+                   f"budget; {samples} samples for a {b_max:.3g} px blur ({SAMPLE_RULE})")
     return {"method": "mesh", "samples": samples, "reasons": reasons, "numbers": numbers}
 
 
@@ -449,7 +501,7 @@ def adaptive_rows(model, axial_mm: np.ndarray, film, n_max: int, band_rows: int 
     blur).  A row's blur is the largest b of any probe pixel within b/2 + 1 rows of
     it (a blurred point spreads over b rows, so light from a blurred neighbour
     counts too); a band's is its rows' maximum; its samples
-    ``clamp(ceil(SAMPLE_K b^2), n_min, n_max)``, the rule of :func:`decide`.
+    :func:`samples_for_blur` ``(b, n_min, n_max)``, the rule of :func:`decide`.
     Returns {band_rows, n_min, band_blur_px, band_samples}.
     """
     a = np.asarray(axial_mm, dtype=float)
@@ -477,8 +529,7 @@ def adaptive_rows(model, axial_mm: np.ndarray, film, n_max: int, band_rows: int 
     nb = math.ceil(h / band_rows)
     band_blur = [float(row_blur[j * band_rows:(j + 1) * band_rows].max()) for j in range(nb)]
     n_min = max(1, min(int(n_min), int(n_max)))
-    band_samples = [int(min(n_max, max(n_min, math.ceil(SAMPLE_K * b ** 2))))
-                    for b in band_blur]
+    band_samples = [samples_for_blur(b, n_min, n_max) for b in band_blur]
     return {"band_rows": int(band_rows), "n_min": n_min, "band_blur_px": band_blur,
             "band_samples": band_samples}
 

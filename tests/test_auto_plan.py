@@ -223,3 +223,55 @@ def test_probe_renders_the_view_and_the_decision_judges_vignetting_by_it(tmp_pat
               pixel_pitch_mm=film.pixel_pitch_mm)
     assert "at least the" in " ".join(decide(**kw, image_error=bright)["reasons"])
     assert "less than the" in " ".join(decide(**kw, image_error=dark)["reasons"])
+
+
+def test_sample_count_is_the_blur_rule_rounded_to_a_power_of_two():
+    from povlens.auto_plan import SAMPLE_K, samples_for_blur
+    assert samples_for_blur(0.0) == MIN_SAMPLES
+    assert samples_for_blur(math.inf) == MAX_SAMPLES and samples_for_blur(1e200) == MAX_SAMPLES
+    for b in [0.3, 3.0, 3.6, 4.5, 5.0, 6.1, 7.3, 9.0, 12.0, 15.0, 17.9, 40.0]:
+        n = samples_for_blur(b)
+        assert MIN_SAMPLES <= n <= MAX_SAMPLES and n & (n - 1) == 0
+        raw = math.ceil(SAMPLE_K * b * b)
+        if MIN_SAMPLES < n < MAX_SAMPLES:          # the nearest power of two in log2
+            assert abs(math.log2(n) - math.log2(raw)) <= 0.5
+    assert samples_for_blur(7.3) == 32               # ceil(0.785 * 53.3) = 42 -> 32
+    assert samples_for_blur(15.0) == 128 and samples_for_blur(17.9) == 256   # 177, 252
+    assert samples_for_blur(14.9, n_max=100) == 100
+    assert samples_for_blur(5.0, n_min=4, n_max=16) == 16
+
+
+def test_vignetting_that_takes_most_of_the_budget_prefers_a_minimum_mesh():
+    """cooke.triplet.50mm focused at 4 m on a scene 4..100 m away: the thin lens is
+    within the budget and the blur under a pixel (the minimum mesh count).  Whether
+    focal_blur is chosen depends on the share of the budget its missing vignetting
+    takes in the scene's image."""
+    kw = dict(tolerance_px=0.5)
+    low = _decide("cooke.triplet.50mm", None, 4, 4, 100, 160, 120,
+                  image_error={"vignetting_rmse": 0.03, "shift_rmse": 0.1}, **kw)
+    assert low["method"] == "focal-blur", low["reasons"]
+    assert low["numbers"]["vignetting_floor_share"] == pytest.approx(0.3)
+    high = _decide("cooke.triplet.50mm", None, 4, 4, 100, 160, 120,
+                   image_error={"vignetting_rmse": 0.07, "shift_rmse": 0.1}, **kw)
+    assert high["method"] == "mesh" and high["samples"] == MIN_SAMPLES, high["reasons"]
+    assert "uses 0.70 of it" in high["reasons"][-1]
+    # without vignetting wanted there is no floor
+    free = _decide("cooke.triplet.50mm", None, 4, 4, 100, 160, 120, vignetting=False,
+                   image_error={"vignetting_rmse": 0.07, "shift_rmse": 0.1}, **kw)
+    assert free["method"] == "focal-blur"
+    # a blur that needs more than the minimum count keeps focal_blur (near 1 m, 4.4 px
+    # at 320x240; a 1 px tolerance keeps the thin lens within the budget there)
+    deep = _decide("cooke.triplet.50mm", None, 4, 1, 100, 320, 240, tolerance_px=1.0,
+                   image_error={"vignetting_rmse": 0.07, "shift_rmse": 0.1})
+    assert deep["numbers"]["max_blur_px"] > 4 and deep["method"] == "focal-blur", deep["reasons"]
+
+
+@pytest.mark.parametrize("lens, guess", [("dgauss.50mm", "mesh"), ("fisheye.10mm", "mesh"),
+                                         ("cooke.triplet.50mm", "either"),
+                                         ("tessar.50mm", "either"),
+                                         ("telephoto.250mm", "views"), ("wide", "views")])
+def test_early_guess_of_the_bundled_lenses(lens, guess):
+    from povlens.convert import _early_guess
+    opts = ConvertOptions(scene=PAPER, lens=lens, focus=4.0, outdir="unused", method="mesh")
+    plan = _make_plan(opts)[0]
+    assert _early_guess(opts, plan) == guess

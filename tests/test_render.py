@@ -242,13 +242,13 @@ def test_more_samples_reuse_the_rendered_ones(tmp_path):
     assert not list(s.glob("sample_*.exr")) and not (out / "exposure.txt").exists()
 
 
-@pytest.mark.parametrize("focus, film_mm, tol", [(4.0, 35.0, 0.5), (1.5, 14.0, 0.2)])
+@pytest.mark.parametrize("focus, film_mm, tol", [(4.0, 35.0, 0.5), (1.5, 10.0, 0.2)])
 def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, focus, film_mm,
                                                                      tol):
     """dgauss.50mm vignettes (relative illumination ~0.33): the lens alone rules out
     the views, so povlens render starts lens samples 0..7 while the depth probe
     runs, and the samples the decision adds follow in the same pipeline (focus
-    1.5 m on a 14 mm film: several pixels of blur, more than 8 samples).  The
+    1.5 m on a 10 mm film: ~5 pixels of blur, 16 samples).  The
     result equals a fixed mesh render of the decided sample count."""
     from povlens.render import convert_and_render
     auto = tmp_path / "auto"
@@ -288,6 +288,39 @@ def test_a_wrong_guess_stops_the_early_samples_and_renders_the_decision(tmp_path
     assert image.exists() and read_image(image).shape[:2] == (36, 48)
     assert _processes_in(out / "samples") == []
     assert not list((out / "samples").glob("sample_*"))
+
+
+@pytest.mark.parametrize("lens, decided", [("telephoto.250mm", "focal-blur"),
+                                            ("dgauss.50mm", "mesh")])
+def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeypatch, lens,
+                                                               decided):
+    """When the vignetting may or may not rule out the views (the guess "either"),
+    povlens render starts the first lens samples and the focal_blur view at once;
+    the decision keeps one and stops the other, and the folder is as a fixed
+    render of the decided method leaves it."""
+    import povlens.convert as conv
+    from povlens.render import convert_and_render
+    monkeypatch.setattr(conv, "_early_guess", lambda opts, plan0: "either")
+    out = tmp_path / "auto"
+    plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto", lens=lens,
+                                          batch_size=None), quiet=True)
+    assert plan["inputs"]["method"] == decided
+    reasons = " ".join(plan["decision"]["reasons"])
+    assert plan["decision"]["reasons"][-1].startswith("-> " + decided)
+    assert _processes_in(out / "samples") == [] and not list(out.glob(".speculative*"))
+    if decided == "focal-blur":
+        assert "mesh render started while the probe ran was stopped" in reasons
+        assert not list((out / "samples").glob("sample_*"))
+        assert read_image(image).shape[:2] == (36, 48)
+    else:
+        assert "focal_blur render started while the probe ran was stopped" in reasons
+        assert "could rule out the views" in reasons
+        assert not (out / "view-focal-blur.exr").exists()
+        fixed = tmp_path / "fixed"
+        convert(opts(tmp_path, outdir=str(fixed), method="mesh", lens=lens,
+                     samples=plan["inputs"]["samples"], batch_size=None))
+        render_outdir(fixed, quiet=True)
+        np.testing.assert_array_equal(read_image(image), read_image(fixed / "image.exr"))
 
 
 def test_a_cancelled_early_render_leaves_no_povray_and_resumes(tmp_path):
