@@ -623,22 +623,54 @@ def _vignetting_may_choose_mesh(opts: ConvertOptions, plan0: dict) -> bool:
 SPECULATIVE_NICE = 10
 
 
-def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict):
+def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict,
+                                  nice: int = SPECULATIVE_NICE):
     """Start the focal_blur render --method auto may choose (:func:`_early_guess`).  Its
     settings (:data:`povlens.auto_plan.FOCAL_BLUR_ADAPTIVE`) do not depend on the
     depth probe, so it runs while the probe does; :func:`convert` keeps it if the
-    decision is focal-blur, else stops it.  Returns the RenderJob or None."""
+    decision is focal-blur, else stops it.  Its wrapper is its own file
+    (``.speculative-focal-blur.pov``, the text the final ``focal_blur.pov`` gets):
+    the provisional mesh plan an "either" guess writes at the same time rewrites
+    ``focal_blur.pov`` with its own sample count, possibly before POV-Ray has read
+    it.  Returns a :class:`_SpeculativeView`."""
     from .auto_plan import FOCAL_BLUR_ADAPTIVE
     from .povray import start_render
     out = Path(opts.outdir)
     guess = dict(plan0, inputs=dict(plan0["inputs"], auto_samples=True),
                  decision={"focal_blur": FOCAL_BLUR_ADAPTIVE})
-    _write_if_changed(out / "focal_blur.pov", _focal_blur_text(guess, out))
+    pov = out / ".speculative-focal-blur.pov"
+    write_text(pov, _focal_blur_text(guess, out))
     film = plan0["film"]
-    return start_render(out / "focal_blur.pov", out / ".speculative-focal-blur.exr",
-                        film["width_px"], film["height_px"], threads=os.cpu_count() or 1,
-                        library_paths=[Path(plan0["inputs"]["scene"]).parent],
-                        nice=SPECULATIVE_NICE)
+    try:
+        job = start_render(pov, out / ".speculative-focal-blur.exr",
+                           film["width_px"], film["height_px"], threads=os.cpu_count() or 1,
+                           library_paths=[Path(plan0["inputs"]["scene"]).parent],
+                           nice=nice)
+    except BaseException:
+        pov.unlink(missing_ok=True)
+        raise
+    return _SpeculativeView(job, pov)
+
+
+class _SpeculativeView:
+    """A running speculative focal_blur render (:func:`_start_speculative_focal_blur`);
+    its wrapper is deleted once it is waited for or cancelled."""
+
+    def __init__(self, job, pov: Path):
+        self._job, self._pov = job, pov
+        self.out_path = job.out_path
+
+    def wait(self):
+        try:
+            return self._job.wait()
+        finally:
+            self._pov.unlink(missing_ok=True)
+
+    def cancel(self) -> None:
+        try:
+            self._job.cancel()
+        finally:
+            self._pov.unlink(missing_ok=True)
 
 
 def _in_background(fn):
