@@ -52,6 +52,9 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR",
                    help="where the CSV, plot and summary go (default benchmarks/results)")
     p.add_argument("--keep", metavar="DIR", help="keep the render folders in DIR")
+    p.add_argument("--repeats", type=positive_int, metavar="N",
+                   help="--auto: runs of each timed configuration, the fastest counts "
+                        "(default 2; quick: 1)")
     p.set_defaults(func=run)
 
 
@@ -62,7 +65,7 @@ def run_auto(args) -> int:
         kw.update(lenses=("telephoto.250mm",), scenes=("paper",), width=48, height=36,
                   reference_samples=64, mesh_samples=(4, 8, 16), focal_blur_samples=(4, 8, 16),
                   repeats=1, name="auto_quick")
-    for name in ("reference_samples", "width", "height", "jobs", "out", "keep"):
+    for name in ("reference_samples", "width", "height", "jobs", "out", "keep", "repeats"):
         v = getattr(args, name)
         if v is not None:
             kw[name] = v
