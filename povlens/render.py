@@ -276,9 +276,13 @@ class _SampleRenders:
             self._reap(block=True)
 
     def abort(self) -> None:
-        """Stop every running process (an error or an interrupt)."""
+        """Stop every running process (an error, an interrupt, a cancelled guess).
+        SIGKILL: what a sample's POV-Ray holds is its temporary folder, deleted here,
+        and SIGTERM would run POV-Ray's shutdown, ~0.3-0.6 s of idle wall time each
+        (a cancelled early render waited 1.2 s for 8 of them)."""
+        for p, _, _ in self.running.values():
+            p.kill()
         for k, (p, tmp, _) in list(self.running.items()):
-            p.terminate()
             p.wait()
             shutil.rmtree(tmp, ignore_errors=True)
             _sample_paths(self.outdir, k)[2].unlink(missing_ok=True)
@@ -327,7 +331,10 @@ def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: 
                 if on_done is not None:
                     on_done()
             queue._reap(block=False)
-        queue.finish()
+        if stop is not None and stop.is_set():
+            queue.abort()   # stopped while waiting for more samples: do not wait for these
+        else:
+            queue.finish()
     except BaseException:
         queue.abort()
         raise
