@@ -569,12 +569,12 @@ def _early_guess(opts: ConvertOptions, plan0: dict) -> str:
       (:data:`SPECULATIVE_NICE`), which takes the CPU the samples leave;
     * ``"views"`` -- otherwise: the adaptive focal_blur view (low priority).
 
-    Measured (2 cores, 160x120, two runs each): with "either" starting both,
-    paper.pov / tessar.50mm (decided mesh 8) took 1.24 / 1.28 s against 1.18 /
-    1.21 s for a fixed 8-sample mesh render, and chart.pov / cooke.triplet.50mm
-    (decided focal-blur) 0.97 / 0.98 s; starting only the samples, at normal or
-    low priority, the chart took 1.62-1.72 s, and starting both with the samples
-    at low priority too, the paper 1.34 / 1.36 s."""
+    Measured (2 cores, 160x120, :func:`povlens.render.convert_and_render` timed in
+    fresh processes):
+    paper.pov / tessar.50mm (decided mesh 8) took 1.30-1.40 s starting both and
+    1.28-1.32 s starting only the samples, against 1.25-1.27 s for a fixed
+    8-sample mesh render; chart.pov / cooke.triplet.50mm (decided focal-blur)
+    1.01-1.09 s starting both and 1.37-1.39 s starting only the samples."""
     if _lens_rules_out_views(opts, plan0):
         return "mesh"
     if _vignetting_may_choose_mesh(opts, plan0):
