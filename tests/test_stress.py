@@ -168,7 +168,12 @@ def test_film_rays_stay_finite_and_round_trip(data, lf):
     hit = bo[:, :2] + t[:, None] * bd[:, :2]
     err = np.abs(hit - start[:, :2]).max(axis=1)
     assert np.all(perp[strict] < 1e-9), (perp[strict].max(), lens.radius_mm, film)
-    assert np.all(err[strict] < 1e-9), (err[strict].max(), lens.radius_mm, film)
+    # Where the returning ray lands on the film: a miss of perp across the ray moves
+    # the landing point by perp / |d_z| in the film plane, so rays meeting the film
+    # more obliquely than |d_z| = 0.1 (84 deg) get that projection in the bound (a
+    # ray with d_z = 0.0147 came back 3.3e-11 mm off its line, 1.3e-9 mm in the plane).
+    bound = 1e-9 * np.maximum(1.0, 0.1 / np.abs(bd[:, 2]))
+    assert np.all(err[strict] < bound[strict]), (err[strict].max(), lens.radius_mm, film)
 
 
 def _condition(lens, film, o, d, out_o, out_d, delta=1e-7):
