@@ -158,6 +158,10 @@ def test_film_rays_stay_finite_and_round_trip(data, lf):
     # condition number K of the forward trace is measured by finite differences
     # (output origin, and direction times 100 mm, per mm / radian of input); rays
     # with K > 1e3 or that meet the film at |d_z| < 0.01 are only checked finite.
+    # Known gap (HYPOTHESIS_PROFILE=explore finds it now and then): at grazing
+    # incidence on a hemisphere's rim (aperture = 2|R|) the sensitivity is a square
+    # root, which finite differences of 1e-7 do not see (K ~ 100 measured), and the
+    # round trip can come back ~1e-9 mm off; the deterministic examples avoid it.
     kcond = _condition(lens, film, np.asarray(o, np.float64)[p[ok]],
                        np.asarray(d, np.float64)[p[ok]], fwd.origin_mm[p[ok]],
                        fwd.direction[p[ok]])
