@@ -115,16 +115,13 @@ def time_at_error(points: list[tuple[float, float]], target: float) -> float:
     return best
 
 
-def _render(opts: ConvertOptions, jobs: int, repeats: int = 1) -> tuple[float, np.ndarray, dict]:
-    """Convert + render into a fresh folder, ``repeats`` times; the fastest time, the
-    last image (renders are deterministic up to POV-Ray's thread scheduling)."""
-    best = math.inf
-    for _ in range(max(1, repeats)):
-        shutil.rmtree(opts.outdir, ignore_errors=True)
-        t0 = time.perf_counter()
-        plan, _ = convert_and_render(opts, jobs=jobs, quiet=True)   # = povlens render
-        best = min(best, time.perf_counter() - t0)
-    return best, read_image(Path(opts.outdir) / "image.exr")[..., :3], plan
+def _render(opts: ConvertOptions, jobs: int) -> tuple[float, np.ndarray, dict]:
+    """Convert + render into a fresh folder; the wall time, the image and the plan."""
+    shutil.rmtree(opts.outdir, ignore_errors=True)
+    t0 = time.perf_counter()
+    plan, _ = convert_and_render(opts, jobs=jobs, quiet=True)   # = povlens render
+    seconds = time.perf_counter() - t0
+    return seconds, read_image(Path(opts.outdir) / "image.exr")[..., :3], plan
 
 
 def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]:
