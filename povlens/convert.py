@@ -623,8 +623,7 @@ def _vignetting_may_choose_mesh(opts: ConvertOptions, plan0: dict) -> bool:
 SPECULATIVE_NICE = 10
 
 
-def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict,
-                                  nice: int = SPECULATIVE_NICE):
+def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict):
     """Start the focal_blur render --method auto may choose (:func:`_early_guess`).  Its
     settings (:data:`povlens.auto_plan.FOCAL_BLUR_ADAPTIVE`) do not depend on the
     depth probe, so it runs while the probe does; :func:`convert` keeps it if the
@@ -645,7 +644,7 @@ def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict,
         job = start_render(pov, out / ".speculative-focal-blur.exr",
                            film["width_px"], film["height_px"], threads=os.cpu_count() or 1,
                            library_paths=[Path(plan0["inputs"]["scene"]).parent],
-                           nice=nice)
+                           nice=SPECULATIVE_NICE)
     except BaseException:
         pov.unlink(missing_ok=True)
         raise
