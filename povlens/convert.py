@@ -566,7 +566,7 @@ def _early_guess(opts: ConvertOptions, plan0: dict) -> str:
       (:func:`_vignetting_may_choose_mesh`): whether :func:`povlens.auto_plan.decide`
       takes mesh for it depends on the scene's image, so both start: the first
       lens samples, and the adaptive focal_blur view at low priority
-      (:data:`SPECULATIVE_NICE`), which takes the CPU the samples leave;
+      (:data:`SPECULATIVE_IDLE`), which takes the CPU the samples leave;
     * ``"views"`` -- otherwise: the adaptive focal_blur view (low priority).
 
     Measured (2 cores, 160x120, :func:`povlens.render.convert_and_render` timed in
@@ -613,14 +613,19 @@ def _vignetting_may_choose_mesh(opts: ConvertOptions, plan0: dict) -> bool:
                 and samples_for_blur(blur) == MIN_SAMPLES)
 
 
-#: Scheduling priority (``nice``) of the focal_blur render started on a guess: it
-#: yields the cores to the probe and model error that decide whether it is needed.
-#: Measured (2 cores, 160x120, two runs each): paper.pov with the 100 mm dgauss
-#: table, where the guess is wrong (mesh 42), 4.73 / 4.77 s against 4.94 / 5.17 s
-#: without; where it is right (chart.pov / cooke.triplet.50mm, paper.pov /
-#: telephoto.250mm) unchanged within the runs' spread (0.93 / 0.93 s against
-#: 0.94 / 0.93 s; 1.31 / 1.35 s against 1.29 / 1.29 s).
-SPECULATIVE_NICE = 10
+#: The focal_blur render started on a guess runs at idle priority (Linux
+#: ``SCHED_IDLE``, :func:`povlens.povray.start_render` ``idle``): it gets only the
+#: CPU time the probe, the model error and the early lens samples leave, and all of
+#: it once the guess is confirmed (the samples are stopped then).  Measured (2 cores,
+#: 160x120, :func:`povlens.render.convert_and_render` in one process, 5 alternating
+#: runs each, min / median): paper.pov / cooke.triplet.50mm, an "either" guess
+#: decided mesh 8, 1.17 / 1.19 s idle against 1.20 / 1.26 s at nice 10 and 1.11 /
+#: 1.14 s for a fixed 8-sample mesh render; chart.pov / cooke.triplet.50mm, decided
+#: focal-blur, 0.94 / 1.01 s against 0.98 / 1.03 s; paper.pov / telephoto.250mm
+#: (right guess) 1.14 / 1.15 s against 1.15 / 1.15 s and paper.pov with the 100 mm
+#: dgauss (wrong guess, mesh 32) 3.48 / 3.55 s against 3.46 / 3.49 s (4 and 3 runs).
+#: (Before 2026-11-29 nice 10, which still takes about a tenth of a busy core.)
+SPECULATIVE_IDLE = True
 
 
 def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict):
@@ -644,7 +649,7 @@ def _start_speculative_focal_blur(opts: ConvertOptions, plan0: dict):
         job = start_render(pov, out / ".speculative-focal-blur.exr",
                            film["width_px"], film["height_px"], threads=os.cpu_count() or 1,
                            library_paths=[Path(plan0["inputs"]["scene"]).parent],
-                           nice=SPECULATIVE_NICE)
+                           idle=SPECULATIVE_IDLE)
     except BaseException:
         pov.unlink(missing_ok=True)
         raise

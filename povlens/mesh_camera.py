@@ -10,9 +10,21 @@ of pixel (i, j):
   usual right-hand-rule normal (§2.4).
 
 Faces are equilateral triangles of circumradius ``s`` built as in §2.5.
-Vertices are written relative to a local origin ``T`` (``%.9g``, float32
-exact) and the mesh is moved into place with ``mesh { NAME translate T }``
-inside the camera, which POV-Ray applies in double precision (§2.6, §4).
+Vertices are written relative to a local origin ``T`` and the mesh is moved into
+place with ``mesh { NAME translate T }`` inside the camera, which POV-Ray applies
+in double precision (§2.6, §4).  They are written as integers on a grid of
+q = 2^e scene units, the finest with every ray vertex below 2^:data:`VERTEX_BITS`
+steps, and the mesh2 ends in ``scale q``: POV-Ray holds each parsed integer as a
+float32 (exact up to 2^24, rounded above, as any float32), applies the power-of-two
+scale exactly in double with the translation, and normalises the face normal.
+Integers format three times faster than ``%.9g`` and make a smaller file: at
+160x120 (paper.pov, cooke.triplet.50mm) a sample's mesh went from 2.72 to 2.03 MB,
+writing it from 76-97 to 50 ms and POV-Ray's CPU time per sample from 0.10 to
+0.088 s.  Accuracy (the same sample, against the float64 rays): direction error
+max 3.0e-8, RMS 1.1e-8 rad, origin error across the ray max 4.7e-8 units; the
+float32 ``%.9g`` vertices of before gave 2.3e-8, 5.7e-9 and 3.5e-8, and the
+reference's expectation for mesh2 is about 1e-7 (§4).  The sink triangle, far
+from ``T``, is written with ``%.9g`` in grid units.
 
 Rays the lens blocks (vignetting) start inside a small black *sink* sphere
 far from the scene (§2.8), so they count as black in POV-Ray's
@@ -62,6 +74,10 @@ SINK_RADIUS = 1.0
 
 #: Default distance of the sink behind the camera (scene units).
 SINK_DISTANCE = 1.0e5
+
+#: Ray-mesh vertices are integers on a grid of q = 2^e scene units, the largest
+#: below 2^VERTEX_BITS steps (module docstring).
+VERTEX_BITS = 26
 
 _IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _SQRT3_2 = math.sqrt(3.0) / 2.0
@@ -217,17 +233,27 @@ def write_ray_mesh(
     ia, ib = np.argsort(np.abs(sr))[:2]
     ea, eb = np.eye(3)[ia], np.eye(3)[ib]
     sink_tri = np.array([sr + s * ea, sr + s * (-0.5 * ea - _SQRT3_2 * eb), sr + s * (-0.5 * ea + _SQRT3_2 * eb)])
-    verts = np.concatenate([np.stack([p1, p2, p3], axis=1).reshape(-1, 3), sink_tri])
-    verts32 = verts.astype(np.float32)
-    if not np.all(np.isfinite(verts32)):
+
+    # Integer vertices on a grid of q = 2^e scene units (``scale q`` in the mesh2):
+    # ray vertices stay below 2^VERTEX_BITS grid steps (see the module docstring).
+    ray_verts = np.stack([p1, p2, p3], axis=1).reshape(-1, 3)
+    span = max(float(np.abs(ray_verts).max()) if len(ray_verts) else 0.0, s)
+    q = math.ldexp(1.0, math.ceil(math.log2(span)) - VERTEX_BITS)
+    ray_int = np.rint(ray_verts / q).astype(np.int64)
+    sink_grid = sink_tri / q
+    with np.errstate(over="ignore"):
+        sink32 = sink_grid.astype(np.float32)
+    if not np.all(np.isfinite(sink32)):
         raise PovlensError(
             f"ray mesh {name}: ray origins or the sink centre are too far from each other "
             "for POV-Ray's float32 mesh vertices",
             "keep the sink centre within about 1e6 scene units of the camera",
         )
+    # what POV-Ray holds: float32 of each parsed value, times q (exact: a power of two)
+    verts = np.concatenate([ray_int.astype(np.float32), sink32]).astype(np.float64) * q
 
     # Check what POV-Ray will compute from the float32 vertices (§2.3, §2.4).
-    tri = verts32.astype(np.float64).reshape(-1, 3, 3)
+    tri = verts.reshape(-1, 3, 3)
     normal = np.cross(tri[:, 2] - tri[:, 0], tri[:, 1] - tri[:, 0])
     area2 = np.linalg.norm(normal, axis=1)
     expected = 1.5 * math.sqrt(3.0) * s * s
@@ -254,18 +280,19 @@ def write_ray_mesh(
     faces[:] = np.arange(nv, nv + 3)
     faces[idx] = 3 * np.arange(len(idx))[:, None] + np.arange(3)
 
-    vflat = verts32.astype(np.float64).reshape(-1).tolist()  # exact float32 values
-    vtext = ",\n".join(["<%.9g,%.9g,%.9g>,<%.9g,%.9g,%.9g>,<%.9g,%.9g,%.9g>"] * (nv // 3 + 1)) % tuple(
-        vflat
-    )
+    rows = ["<%d,%d,%d>,<%d,%d,%d>,<%d,%d,%d>,\n"] * len(idx)
+    vtext = "".join(rows) % tuple(ray_int.reshape(-1).tolist())
+    vtext += "<%.9g,%.9g,%.9g>,<%.9g,%.9g,%.9g>,<%.9g,%.9g,%.9g>" % tuple(
+        sink32.astype(np.float64).reshape(-1).tolist())
     ftext = ",\n".join(["<%d,%d,%d>"] * n) % tuple(faces.reshape(-1).tolist())
     text = (
         f"// povlens ray mesh: {w} x {h} pixels, {n} faces in row-major order (row 0 = top);\n"
         f"// {n - len(idx)} blocked rays start in the sink sphere at {_vec(sink)}.\n"
-        f"// Use as: mesh {{ {name} translate {_vec(t)} }}\n"
+        f"// Vertices in steps of {q:.17g} units (scale); use as: mesh {{ {name} translate {_vec(t)} }}\n"
         f"#declare {name} = mesh2 {{\n"
         f"vertex_vectors {{ {nv + 3},\n{vtext}\n}}\n"
         f"face_indices {{ {n},\n{ftext}\n}}\n"
+        f"scale {q:.17g}\n"
         f"}}\n"
     )
     write_text(path, text)

@@ -341,6 +341,20 @@ def render(
     ).wait()  # fmt: skip
 
 
+def _lower_priority(nice: int, idle: bool):
+    """The ``preexec_fn`` of :func:`start_render` (runs in the child, before exec)."""
+    if idle:
+        def lower():
+            try:
+                os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+            except (AttributeError, OSError):
+                os.nice(19)
+        return lower
+    if nice > 0:
+        return lambda: os.nice(nice)
+    return None
+
+
 def start_render(
     pov_path: str | os.PathLike,
     out_path: str | os.PathLike,
@@ -357,12 +371,15 @@ def start_render(
     library_paths: Iterable[str | os.PathLike] = (),
     timeout: float | None = None,
     nice: int = 0,
+    idle: bool = False,
 ) -> "RenderJob":
     """Start the render :func:`render` describes and return at once.
 
-    ``nice`` > 0 lowers the process's scheduling priority (``os.nice``): a render
-    started on a guess yields the cores to the work that decides whether it is
-    needed.
+    ``nice`` > 0 lowers the process's scheduling priority (``os.nice``).  ``idle``
+    runs it only on CPU time nothing else wants (Linux ``SCHED_IDLE``; ``nice 19``
+    where the OS has no such policy): a render started on a guess yields the cores
+    to the work that decides whether it is needed, and gets them all once that
+    work is done.
 
     POV-Ray 3.7 spends most of a small render's wall time idle (~0.6 s per
     process, a few ms of CPU), so independent renders are best started together
@@ -419,7 +436,7 @@ def start_render(
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL,
                 stderr=err,
-                preexec_fn=(lambda: os.nice(nice)) if nice > 0 else None,
+                preexec_fn=_lower_priority(nice, idle),
             )
         except FileNotFoundError:
             raise PovrayError(

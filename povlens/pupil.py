@@ -470,10 +470,20 @@ class SamplerMeasurements:
                              n_samples=n_samples, seed=seed)
 
     def irradiance_factor(self, film_radius_mm, *, n_samples: int = 4096, seed: int = 0):
-        """Estimated E/L at each film radius (:func:`povlens.sampling.irradiance_factor`)."""
+        """Estimated E/L at each film radius (:func:`povlens.sampling.irradiance_factor`).
+
+        Remembered per sampler for the radii, sample count and seed (a sampler does
+        not change once built): an auto conversion asks for the same radii twice,
+        for the plan's model error and again at the depth probe's depths (the
+        relative illumination does not depend on depth), ~0.03 s each."""
         from .sampling import irradiance_factor
-        return irradiance_factor(self, self.lens, self.film_distance_mm, film_radius_mm,
-                                 n_samples=n_samples, seed=seed)
+        radii = np.atleast_1d(np.asarray(film_radius_mm, dtype=np.float64))
+        key = (radii.tobytes(), int(n_samples), int(seed))
+        cache = self.__dict__.setdefault("_irradiance_factor_cache", {})
+        if key not in cache:
+            cache[key] = irradiance_factor(self, self.lens, self.film_distance_mm, radii,
+                                           n_samples=n_samples, seed=seed)
+        return cache[key].copy()
 
 
 class PupilTable(SamplerMeasurements):

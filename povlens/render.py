@@ -476,10 +476,16 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
     if todo:
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)
-        _exposure(outdir, plan, lens, table)
+
+        def samples():
+            yield from todo
+            # every sample is written and its POV-Ray started: the composite's
+            # exposure is computed while they run (not after)
+            _exposure(outdir, plan, lens, table)
+
         with _progress(len(todo), "lens samples", quiet) as bar:
-            timing = render_samples(plan, lens, table, outdir, 0, todo, in_flight=in_flight,
-                                    on_done=lambda: bar.update(1))
+            timing = render_samples(plan, lens, table, outdir, 0, samples(),
+                                    in_flight=in_flight, on_done=lambda: bar.update(1))
         write_text(outdir / "samples" / "render.timing.json", json.dumps(timing) + "\n")
     _mark_batches_done(outdir, plan)
     composite_outdir(outdir)
@@ -506,6 +512,7 @@ class _EarlyRender:
         self._todo = [k for k in range(plan["inputs"]["samples"])
                       if not _sample_done(self._outdir, k)]
         self._final = plan
+        self._lens, self._table = lens, table
         self._bar = _progress(len(self._todo), "lens samples", quiet)
         self._thread = threading.Thread(target=self._run, args=(lens, table, in_flight),
                                         daemon=True)
@@ -513,7 +520,13 @@ class _EarlyRender:
 
     def _samples(self):
         i = 0
+        exposure_known = False
         while True:
+            if i >= len(self._todo) and not exposure_known and not self._stop.is_set():
+                # nothing to write until the decision adds samples: the composite's
+                # exposure is computed now, while POV-Ray runs, instead of after
+                _exposure(self._outdir, self._final, self._lens, self._table)
+                exposure_known = True
             with self._more:
                 while i >= len(self._todo) and not self._closed and not self._stop.is_set():
                     self._more.wait(0.05)

@@ -210,6 +210,19 @@ def test_start_render_can_lower_the_priority(tmp_path):
     assert (tmp_path / "a.exr").exists()
 
 
+def test_start_render_can_run_at_idle_priority(tmp_path):
+    """idle=True: Linux's SCHED_IDLE policy (5), field 41 of /proc/PID/stat."""
+    scene = tmp_path / "s.pov"
+    scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
+    job = povray.start_render(scene, tmp_path / "a.exr", 16, 12, idle=True)
+    try:
+        fields = open(f"/proc/{job.proc.pid}/stat").read().rsplit(")", 1)[1].split()
+        assert int(fields[38]) == os.SCHED_IDLE
+    finally:
+        job.wait()
+    assert (tmp_path / "a.exr").exists()
+
+
 def test_version_is_remembered_across_runs_and_asked_again_after_an_upgrade(tmp_path,
                                                                            monkeypatch):
     """The version cache: a second process (lru_cache cleared) does not run POV-Ray;
