@@ -96,7 +96,10 @@ SAMPLE_RULE = (f"N = ceil({SAMPLE_K:.3g} b^2) rounded to the nearest power of tw
 #: minimum sample count to a focal_blur the thin lens would otherwise allow.  No
 #: focal_blur sample count brings its error below that floor, and a mesh render of
 #: :data:`MIN_SAMPLES` costs about what the adaptive focal blur does (paper.pov,
-#: 160x120: 1.12-1.14 s against 1.04-1.16 s).  Measured on the bundled scenes
+#: 160x120: 1.12-1.14 s against 1.04-1.16 s; since the integer mesh vertices of
+#: 2026-11-29, 0.88-0.97 s for fixed 8-sample renders with cooke.triplet.50mm and
+#: tessar.50mm against 1.15-1.27 s for auto's focal blur with telephoto.250mm and
+#: wide, benchmarks/results/auto.txt).  Measured on the bundled scenes
 #: (benchmarks/results/auto.*; probe share in brackets): where the mesh render
 #: was better at equal time, paper.pov with cooke.triplet.50mm (0.76) and
 #: tessar.50mm (0.99), 8 mesh samples reached RMSE 0.027 / 0.027 against the

@@ -394,11 +394,12 @@ def convert(opts: ConvertOptions, render_early=None) -> dict:
             reuse = {"pupil_table": table, "model_error": plan0["model_error"],
                      "version": lambda: plan0["povray"]["version"]}
             guess = _early_guess(opts, plan0) if opts.speculate else "none"
-            if opts.auto_samples and guess in ("views", "either"):
-                speculative = _start_speculative_focal_blur(opts, plan0)
+            # the lens samples first: where they are wanted, they are the critical path
             if (render_early is not None and not opts.adaptive
                     and guess in ("mesh", "either")):
                 early = _render_early(opts, start, reuse, lens, table, render_early)
+            if opts.auto_samples and guess in ("views", "either"):
+                speculative = _start_speculative_focal_blur(opts, plan0)
             decision = choose_method(base, plan0, model, lens, film, probe=probe,
                                      pupil_table=table)
             if early is not None:

@@ -47,7 +47,7 @@ from .images import read_image, write_exr, write_png_srgb
 from .lens_camera import ScenePlacement, sample_points, sample_rays
 from .mesh_camera import write_ray_mesh, write_text
 from .paraxial import stopped_down
-from .povray import find_povray, output_written, render as povray_render
+from .povray import FIRST_OUTPUT_S, find_povray, output_written, render as povray_render
 from .prescription import read_lens
 
 __all__ = ["convert_and_render", "render_samples", "render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
@@ -228,11 +228,13 @@ class _SampleRenders:
                                     stdout=subprocess.DEVNULL, stderr=err)
         self.running[k] = (proc, tmp, time.perf_counter())
 
-    def _finished(self, proc: subprocess.Popen, tmp: Path) -> bool:
+    def _finished(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
         """POV-Ray exited, or wrote and closed its image (it then idles ~0.3 s
         before exiting: :func:`povlens.povray.output_written`)."""
         if proc.poll() is not None:
             return True
+        if time.perf_counter() - self.running[k][2] < FIRST_OUTPUT_S:
+            return False
         if output_written(proc.pid, tmp / "f.exr"):
             proc.kill()  # nothing left but its shutdown (SIGTERM would run it)
             proc.wait()
@@ -242,7 +244,7 @@ class _SampleRenders:
 
     def _reap(self, block: bool) -> None:
         while True:
-            done = [k for k, (p, tmp, _) in self.running.items() if self._finished(p, tmp)]
+            done = [k for k, (p, tmp, _) in self.running.items() if self._finished(k, p, tmp)]
             if done or not block:
                 break
             time.sleep(0.005)
