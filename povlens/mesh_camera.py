@@ -75,8 +75,8 @@ SINK_RADIUS = 1.0
 #: Default distance of the sink behind the camera (scene units).
 SINK_DISTANCE = 1.0e5
 
-#: Ray-mesh vertices are integers on a grid of q = 2^e scene units, the largest
-#: below 2^VERTEX_BITS steps (module docstring).
+#: Ray-mesh vertices are integers on a grid of q = 2^e scene units: the finest
+#: grid on which every ray vertex is below 2^VERTEX_BITS steps (module docstring).
 VERTEX_BITS = 26
 
 _IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
