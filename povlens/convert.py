@@ -383,12 +383,17 @@ def convert(opts: ConvertOptions, render_early=None) -> dict:
         start = _start_plan(base)                         # validates the inputs first
         # The depth probe's POV-Ray processes (mostly idle start-up) and 'povray
         # --version' run while the pupil table is built and the model error measured.
-        probe = start_depth_probe(base, start.film, {"povray_camera": start.povray_camera,
-                                                     "mm_per_unit": start.mm_per_unit})
+        # The probe is started from a thread: its three process starts (~2.5 ms
+        # each, Python waits for the exec) do not hold up the pupil table.
+        probe_started = _in_background(lambda: start_depth_probe(
+            base, start.film, {"povray_camera": start.povray_camera,
+                               "mm_per_unit": start.mm_per_unit}))
+        probe = None
         speculative = None
         try:
             version = _in_background(povray_version)
             plan0, lens, model, film, table = _finish_plan(base, start, version=version)
+            probe = probe_started()                       # long started by now
             # The plan of the chosen method differs from plan0 only in the method, the
             # samples and the batches: same table, same model error.
             reuse = {"pupil_table": table, "model_error": plan0["model_error"],
@@ -415,7 +420,13 @@ def convert(opts: ConvertOptions, render_early=None) -> dict:
                     _note(decision, "(the mesh render started while the probe ran was "
                                     "stopped)")
         except BaseException:
-            probe.cancel()
+            if probe is None:
+                try:
+                    probe = probe_started()
+                except BaseException:
+                    probe = None
+            if probe is not None:
+                probe.cancel()
             if speculative is not None:
                 speculative.cancel()
             if early is not None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import weakref
 
 import numpy as np
 
@@ -167,6 +168,31 @@ def fit_thin_lens(lens: LensPrescription, film_distance_mm: float, focus_z_mm: f
                               rms if math.isfinite(rms) else -1.0)
 
 
+#: Chief rays of the model-error field heights, per lens object (by identity:
+#: prescriptions are frozen; a weak reference tells a new object at the same id)
+#: and film distance.  A --method auto conversion measures the model error twice
+#: with the same lens, focus and field heights (the plan's standard depths, then
+#: the depth probe's); the chief-ray search, ~4 ms of each, is done once.
+_CHIEF_RAYS: dict = {}
+
+
+def _chief_rays_remembered(lens, film_distance_mm: float, hs: np.ndarray):
+    """:func:`chief_rays` of ``hs`` (F,), remembered; the arrays are read-only."""
+    entry = _CHIEF_RAYS.get(id(lens))
+    if entry is None or entry[0]() is not lens:
+        if len(_CHIEF_RAYS) >= 8:
+            _CHIEF_RAYS.clear()
+        entry = _CHIEF_RAYS[id(lens)] = (weakref.ref(lens), {})
+    per_lens = entry[1]
+    key = (float(film_distance_mm), np.asarray(hs, dtype=np.float64).tobytes())
+    if key not in per_lens:
+        rays, found = chief_rays(lens, film_distance_mm, hs)
+        for a in (rays.origin_mm, rays.direction, rays.passed, rays.blocked_at, found):
+            a.flags.writeable = False
+        per_lens[key] = rays, found
+    return per_lens[key]
+
+
 def _bundle_geometry(lens, film_distance_mm, model, film, object_z_mm, n_field, n_rings):
     """What both model-error measurements share: pixel pitch, depths (D,), film
     heights (F,), the diagonal direction, the pupil disc points (M, 2), the
@@ -178,7 +204,7 @@ def _bundle_geometry(lens, film_distance_mm, model, film, object_z_mm, n_field, 
     diag_dir = np.array([film.width_mm, film.height_mm]) / math.hypot(film.width_mm, film.height_mm)
     disc = pupil_disc_points(n_rings) * (0.75 * model.pupil_diameter_mm)
     ep_z = model.centre_z_mm
-    chief, found = chief_rays(lens, film_distance_mm, hs)
+    chief, found = _chief_rays_remembered(lens, film_distance_mm, hs)
     with np.errstate(all="ignore"):
         t = (ep_z - chief.origin_mm[:, 2]) / chief.direction[:, 2]
         x_c = chief.origin_mm[:, 0] + t * chief.direction[:, 0]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 import os
 import shutil
+import time
 
 import numpy as np
 import pytest
@@ -146,7 +147,6 @@ def test_image_is_taken_when_written_not_at_process_exit(tmp_path):
     """POV-Ray idles ~0.3 s after closing its image; output_written sees the
     closed file while the process still runs, and the image is complete."""
     import subprocess
-    import time
     scene = tmp_path / "s.pov"
     scene.write_text(FLAT + "sphere { 0, 1 pigment { checker rgb 1 rgb 0 scale 0.2 } "
                             "finish { ambient 1 diffuse 0 } }\n")
@@ -173,7 +173,6 @@ def test_a_wrapper_script_is_never_judged_done_before_it_exits(tmp_path):
     """A POVLENS_POVRAY wrapper may work on after its POV-Ray child exits (the
     window between the child's exit and its own): never picked up early then."""
     import subprocess
-    import time
     scene = tmp_path / "s.pov"
     scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
     out = tmp_path / "a.exr"
@@ -197,12 +196,33 @@ def test_a_wrapper_script_is_never_judged_done_before_it_exits(tmp_path):
     assert (tmp_path / "marker").exists()
 
 
-def test_start_render_can_lower_the_priority(tmp_path):
+def _povray_stat(pid: int) -> list[str]:
+    """/proc/PID/stat fields after the name, once PID runs POV-Ray (a ``chrt`` or
+    ``nice`` prefix execs it in the same process)."""
+    deadline = time.monotonic() + 5
+    while "povray" not in os.path.basename(os.readlink(f"/proc/{pid}/exe")):
+        assert time.monotonic() < deadline, "POV-Ray did not start"
+        time.sleep(0.001)
+    return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+
+
+@pytest.fixture(params=["prefix", "preexec_fn"])
+def priority_by(request, monkeypatch):
+    """Both ways start_render lowers priorities: a chrt / nice prefix, and the
+    preexec_fn fallback where those programs are missing."""
+    if request.param == "preexec_fn":
+        monkeypatch.setattr(povray, "_priority_tools", lambda: (None, None))
+    else:
+        assert all(povray._priority_tools()), "chrt and nice are on every Debian"
+    return request.param
+
+
+def test_start_render_can_lower_the_priority(tmp_path, priority_by):
     scene = tmp_path / "s.pov"
     scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
     job = povray.start_render(scene, tmp_path / "a.exr", 16, 12, nice=7)
     try:
-        fields = open(f"/proc/{job.proc.pid}/stat").read().rsplit(")", 1)[1].split()
+        fields = _povray_stat(job.proc.pid)
         own = int(open("/proc/self/stat").read().rsplit(")", 1)[1].split()[16])
         assert int(fields[16]) == min(19, own + 7)     # field 19 of stat: nice
     finally:
@@ -210,13 +230,13 @@ def test_start_render_can_lower_the_priority(tmp_path):
     assert (tmp_path / "a.exr").exists()
 
 
-def test_start_render_can_run_at_idle_priority(tmp_path):
+def test_start_render_can_run_at_idle_priority(tmp_path, priority_by):
     """idle=True: Linux's SCHED_IDLE policy (5), field 41 of /proc/PID/stat."""
     scene = tmp_path / "s.pov"
     scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
     job = povray.start_render(scene, tmp_path / "a.exr", 16, 12, idle=True)
     try:
-        fields = open(f"/proc/{job.proc.pid}/stat").read().rsplit(")", 1)[1].split()
+        fields = _povray_stat(job.proc.pid)
         assert int(fields[38]) == os.SCHED_IDLE
     finally:
         job.wait()

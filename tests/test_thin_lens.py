@@ -110,3 +110,28 @@ def test_vectorized_model_error_equals_the_bundle_by_bundle_reference(lens_name,
         np.testing.assert_allclose(np.asarray(fast[k], float), np.asarray(slow[k], float),
                                    rtol=1e-9, atol=1e-9, err_msg=k)
         assert np.all(np.isfinite(np.asarray(fast[k], float))), k
+
+
+def test_model_error_searches_the_chief_rays_once_per_lens_and_focus(monkeypatch):
+    """A second measurement (other depths) with the same lens object and film
+    distance reuses the chief rays; another focus or another lens object (even an
+    equal one) searches again, and the result equals a fresh measurement."""
+    import povlens.thin_lens as tl
+    lens = read_lens("tessar.50mm")
+    film = Film.from_diagonal(43.27, 96, 64)
+    f = thick_lens_film_distance_mm(lens, 3000.0)
+    m = fit_thin_lens(lens, f, 3000.0, film)
+    calls = []
+    real = tl.chief_rays
+    monkeypatch.setattr(tl, "chief_rays", lambda *a: calls.append(a) or real(*a))
+    tl._CHIEF_RAYS.clear()
+    measure_model_error(lens, f, m, film, [m.centre_z_mm + 2000.0])
+    again = measure_model_error(lens, f, m, film, [m.centre_z_mm + 500.0, 1e6])
+    assert len(calls) == 1
+    measure_model_error(lens, f + 0.01, m, film, [m.centre_z_mm + 500.0])
+    assert len(calls) == 2
+    copy = lens.replace()
+    fresh = measure_model_error(copy, f, m, film, [m.centre_z_mm + 500.0, 1e6])
+    assert len(calls) == 3
+    for k in fresh:
+        np.testing.assert_array_equal(np.asarray(again[k], float), np.asarray(fresh[k], float))
