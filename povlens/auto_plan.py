@@ -415,8 +415,10 @@ def start_depth_probe(opts, film, plan: dict, threads: int = 1):
     :func:`povlens.convert._start_plan` derives): its ``povray_camera`` is the
     probe's, since the probe's film is the same in mm; only the pixels differ.
     Besides the two fogged renders, the view without fog is rendered (``image``
-    of the probe: the vignetting's effect on the image).  The renders run in a temporary folder ``.probe.*`` in OUTDIR (``threads``
-    POV-Ray threads each)."""
+    of the probe: the vignetting's effect on the image) when the lens's vignetting
+    is wanted (``opts.vignetting``); with ``--no-vignetting`` nothing reads it, and
+    the probe is one POV-Ray process fewer.  The renders run in a temporary folder
+    ``.probe.*`` in OUTDIR (``threads`` POV-Ray threads each)."""
     from .depth_probe import start_probe
     pw, ph = probe_size(film)
     out = Path(opts.outdir)
@@ -425,7 +427,7 @@ def start_depth_probe(opts, film, plan: dict, threads: int = 1):
                   "inputs": {"scene": str(Path(opts.scene).resolve()), "focus": opts.focus}}
     return start_probe(probe_plan, out, width=pw, height=ph, threads=threads,
                        keep_wrappers=False, prefix=".probe.", label=str(opts.scene),
-                       view=True)
+                       view=bool(getattr(opts, "vignetting", True)))
 
 
 def probe_axial_mm(probe) -> np.ndarray:

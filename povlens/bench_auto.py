@@ -5,7 +5,7 @@ lens, one run renders, each end to end (``convert`` + ``render`` into a fresh
 folder, timed on the wall clock, as a user runs ``povlens render``; every timed
 configuration runs ``repeats`` times and the fastest counts, the same for all;
 the repeats are interleaved: every configuration of a scene / lens once, then
-again):
+again; the medians are reported beside the fastest):
 
 * a **reference**: the mesh path with many samples (its own seed), the lens's
   vignetting kept (the plan default);
@@ -24,7 +24,11 @@ to reach auto's RMSE: interpolated in log-log between the two sweep points that
 bracket it; the time of its cheapest point if even that is better than auto; not
 reachable (``inf``) if its best point is worse (focal_blur's model-error floor,
 pinhole's missing blur).  The best fixed method is the fastest of these, and the
-ratio ``auto / best`` is the column the issue asks for (<= 1.10 to pass).
+ratio ``auto / best`` is the column the issue asks for (<= 1.10 to pass).  The
+same ratio of the median runs is printed beside it (column ``med``): a minimum
+of five runs hangs on one lucky run (paper.pov with cooke.triplet.50mm, the fixed
+8-sample mesh: fastest of five 0.91 s in one bench run, 0.85 s in the next, with
+the same code for it), a median does not.
 
 **Error budget in image terms.**  ``--tolerance`` is in pixels.  Its image
 equivalent for a scene is the RMSE that moving the reference by the tolerance
@@ -40,6 +44,7 @@ import dataclasses
 import math
 import os
 import shutil
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -84,9 +89,10 @@ class AutoRow:
     lens: str
     method: str          # reference, auto, pinhole, focal-blur, mesh
     samples: int
-    seconds: float
+    seconds: float       # the fastest of the repeats
     rmse: float
     chosen: str = ""     # auto: the method it chose
+    median_s: float = math.nan   # the median of the repeats
 
 
 def corrected_rmse(measured: float, reference_noise: float) -> float:
@@ -179,24 +185,27 @@ def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]
                 # slow phase of the machine (another process, clock changes after the
                 # long reference) does not fall on one configuration's runs only.
                 best: dict = {}
+                times: dict = {}
                 for _ in range(max(1, s.repeats)):
                     for method, k in runs:
                         t, img, plan = _render(run_opts(method, k), jobs)
+                        times.setdefault((method, k), []).append(t)
                         if (method, k) not in best or t < best[(method, k)][0]:
                             best[(method, k)] = (t, img, plan)
                 for method, k in runs:
                     t, img, plan = best[(method, k)]
+                    med = statistics.median(times[(method, k)])
                     if method == "auto":
                         chosen = plan["inputs"]["method"]
                         n = int(plan["inputs"]["samples"])
-                        rows.append(AutoRow(scene, lens, "auto", n, t, err(img), chosen))
+                        rows.append(AutoRow(scene, lens, "auto", n, t, err(img), chosen, med))
                         details[(scene, lens)] = {"budget": budget,
                                                   "decision": plan.get("decision", {}),
                                                   "adaptive": plan.get("adaptive")}
                         log(f"{tag}: auto -> {chosen} N={n} {t:.2f} s rmse "
                             f"{rows[-1].rmse:.5f} (budget {budget:.5f})")
                     else:
-                        rows.append(AutoRow(scene, lens, method, k, t, err(img)))
+                        rows.append(AutoRow(scene, lens, method, k, t, err(img), "", med))
                         log(f"{tag}: {method} N={k} {t:.2f} s rmse {rows[-1].rmse:.5f}")
                 if not s.keep:
                     shutil.rmtree(tmp / tag, ignore_errors=True)
@@ -218,18 +227,20 @@ def _write_csv(path: Path, rows: list[AutoRow]) -> None:
     part = path.with_name("." + path.name + ".part")
     with open(part, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["scene", "lens", "method", "samples", "seconds", "rmse", "chosen"])
+        w.writerow(["scene", "lens", "method", "samples", "seconds", "rmse", "chosen",
+                    "median_seconds"])
         for r in rows:
             w.writerow([r.scene, r.lens, r.method, r.samples, f"{r.seconds:.4f}",
-                        f"{r.rmse:.6g}", r.chosen])
+                        f"{r.rmse:.6g}", r.chosen, f"{r.median_s:.4f}"])
     os.replace(part, path)
 
 
-def best_fixed(rows: list[AutoRow], target: float) -> dict[str, float]:
-    """Per fixed method, the seconds to reach RMSE ``target`` (:func:`time_at_error`)."""
+def best_fixed(rows: list[AutoRow], target: float, median: bool = False) -> dict[str, float]:
+    """Per fixed method, the seconds to reach RMSE ``target`` (:func:`time_at_error`),
+    from the fastest runs (or the ``median`` ones)."""
     out = {}
     for m in ("pinhole", "focal-blur", "mesh"):
-        pts = [(r.seconds, r.rmse) for r in rows if r.method == m]
+        pts = [(r.median_s if median else r.seconds, r.rmse) for r in rows if r.method == m]
         if pts:
             out[m] = time_at_error(pts, target)
     return out
@@ -243,13 +254,13 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
              f"{','.join(map(str, s.mesh_samples))}, auto adaptive {s.adaptive}; "
              f"{os.cpu_count()} cpus, python {platform.python_version()}; total {total_s:.0f} s",
              f"times are end to end (convert + render into a fresh folder), fastest of "
-             f"{s.repeats} interleaved runs; "
+             f"{s.repeats} interleaved runs (column 'med': the ratio of the medians); "
              "rmse corrected for the reference's own noise (column 'rmse' of the reference "
              "rows)",
              "",
              f"{'scene':<7}{'lens':<20}{'auto chose':<16}{'auto s':>8}{'auto rmse':>11}"
              f"{'budget':>9}{'pinhole s':>11}{'f-blur s':>10}{'mesh s':>9}{'best':>12}"
-             f"{'auto/best':>11}"]
+             f"{'auto/best':>11}{'med':>7}"]
     verdicts = []
     for (scene, lens), info in details.items():
         rs = [r for r in rows if r.scene == scene and r.lens == lens]
@@ -261,8 +272,10 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
         ratio = auto.seconds / best_t if math.isfinite(best_t) else 0.0
         if not math.isfinite(best_t):
             best_m = "none"
+        med_t = min(best_fixed(rs, auto.rmse, median=True).values())
+        med_ratio = auto.median_s / med_t if math.isfinite(med_t) else 0.0
         ok_budget = auto.rmse <= info["budget"]
-        verdicts.append((ratio <= 1.10, ok_budget))
+        verdicts.append((ratio <= 1.10, ok_budget, med_ratio <= 1.10))
 
         def f(x):
             return f"{x:.2f}" if math.isfinite(x) else "never"
@@ -271,15 +284,18 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
                      f"{f(fixed.get('pinhole', math.inf)):>11}"
                      f"{f(fixed.get('focal-blur', math.inf)):>10}"
                      f"{f(fixed.get('mesh', math.inf)):>9}{best_m:>12}"
-                     f"{(f'{ratio:.3f}' if ratio else '< all'):>11}")
+                     f"{(f'{ratio:.3f}' if ratio else '< all'):>11}"
+                     f"{(f'{med_ratio:.3f}' if med_ratio else '< all'):>7}")
     lines.append("")
     lines.append("columns 'pinhole s', 'f-blur s', 'mesh s': time each fixed method needs to "
                  "reach auto's rmse (log-log interpolation over its sweep; 'never' = its best "
                  "point is worse); '< all': no fixed setting measured reaches auto's rmse")
     n_fast = sum(v[0] for v in verdicts)
     n_budget = sum(v[1] for v in verdicts)
+    n_med = sum(v[2] for v in verdicts)
     lines.append(f"auto within 10 % of the best fixed method at equal error: {n_fast} of "
-                 f"{len(verdicts)}; auto rmse within the budget: {n_budget} of {len(verdicts)}")
+                 f"{len(verdicts)} (fastest runs), {n_med} of {len(verdicts)} (median runs); "
+                 f"auto rmse within the budget: {n_budget} of {len(verdicts)}")
     lines.append("")
     lines.append("why auto chose what it chose:")
     for (scene, lens), info in details.items():

@@ -187,6 +187,26 @@ def test_vignetting_and_shift_rmse_on_simple_images():
     assert shift_rmse(ramp, 1.5) == pytest.approx(0.5 * 0.015)
 
 
+def test_probe_skips_the_view_when_the_vignetting_is_not_wanted(tmp_path):
+    """--no-vignetting: nothing reads the probe's view, so it is not rendered (two
+    POV-Ray processes, not three); the depths are the same as with it."""
+    import numpy as np
+    from povlens.auto_plan import probe_axial_mm, start_depth_probe
+    depths = {}
+    for wanted in (True, False):
+        out = tmp_path / str(wanted)
+        out.mkdir()
+        opts = ConvertOptions(scene=PAPER, lens="cooke.triplet.50mm", focus=4.0,
+                              outdir=str(out), width=96, height=72, method="mesh",
+                              vignetting=wanted)
+        plan, L, model, film = _make_plan(opts)
+        probe = start_depth_probe(opts, film, plan)
+        assert ("view" in probe._jobs) is wanted
+        depths[wanted] = probe_axial_mm(probe)
+        assert (probe.image is not None) is wanted
+    np.testing.assert_array_equal(depths[True], depths[False])
+
+
 def test_probe_renders_the_view_and_the_decision_judges_vignetting_by_it(tmp_path):
     """The probe's fog-free view equals a pinhole render at the probe size; a lens
     whose corners lose 12 % (cooke.triplet.50mm) is a deviation on a bright scene

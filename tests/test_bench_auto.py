@@ -54,9 +54,12 @@ def test_bench_auto_tiny(tmp_path, capsys):
     auto = rows[1]
     assert auto["chosen"] in ("pinhole", "focal-blur", "mesh")
     assert all(float(r["seconds"]) > 0 for r in rows)
+    # one repeat (--quick): the median is that run
+    assert all(float(r["median_seconds"]) == float(r["seconds"]) for r in rows[1:])
     assert all(float(r["rmse"]) > 0 for r in rows)   # reference row: its own noise
     text = (tmp_path / "auto_quick.txt").read_text()
     assert "auto/best" in text and "why auto chose" in text
+    assert "(median runs)" in text
     assert "vignetting's image RMSE" in text               # the probe's image criterion
 
 
