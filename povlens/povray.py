@@ -343,9 +343,20 @@ def render(
 
 @functools.lru_cache(maxsize=None)
 def _priority_tools() -> tuple[str | None, str | None]:
-    """Paths of util-linux ``chrt`` (only where Python knows ``SCHED_IDLE``) and
-    coreutils ``nice``, or None."""
+    """Paths of util-linux ``chrt`` and coreutils ``nice``, or None.  ``chrt`` only
+    where Python knows ``SCHED_IDLE`` and a first ``chrt --idle 0 true`` works (a
+    sandbox may forbid the policy: chrt would then fail instead of running POV-Ray;
+    the ``preexec_fn`` falls back to nice 19)."""
     chrt = shutil.which("chrt") if hasattr(os, "SCHED_IDLE") else None
+    true = shutil.which("true")
+    if chrt is not None:
+        try:
+            ok = true is not None and subprocess.run(
+                [chrt, "--idle", "0", true], stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=10).returncode == 0
+        except (OSError, subprocess.SubprocessError):
+            ok = False
+        chrt = chrt if ok else None
     return chrt, shutil.which("nice")
 
 

@@ -270,3 +270,27 @@ def test_version_is_remembered_across_runs_and_asked_again_after_an_upgrade(tmp_
         assert povray.povray_version(str(script)) == v
     assert len(calls) == 4
     povray._version_of.cache_clear()
+
+
+def test_a_chrt_that_cannot_set_the_policy_is_not_used(tmp_path, monkeypatch):
+    """A sandbox may forbid SCHED_IDLE: chrt then exits 1 instead of running POV-Ray.
+    The first use tries 'chrt --idle 0 true'; on failure the preexec_fn fallback
+    starts POV-Ray (here with SCHED_IDLE, which this machine permits)."""
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "chrt").write_text("#!/bin/sh\necho 'chrt: failed to set pid 0 policy' >&2\nexit 1\n")
+    (fake / "chrt").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake}:{os.environ['PATH']}")
+    povray._priority_tools.cache_clear()
+    try:
+        assert povray._priority_tools()[0] is None
+        scene = tmp_path / "s.pov"
+        scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
+        job = povray.start_render(scene, tmp_path / "a.exr", 16, 12, idle=True)
+        try:
+            assert int(_povray_stat(job.proc.pid)[38]) == os.SCHED_IDLE
+        finally:
+            job.wait()
+        assert (tmp_path / "a.exr").exists()
+    finally:
+        povray._priority_tools.cache_clear()
