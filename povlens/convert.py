@@ -388,7 +388,6 @@ def convert(opts: ConvertOptions, render_early=None) -> dict:
         probe_started = _in_background(lambda: start_depth_probe(
             base, start.film, {"povray_camera": start.povray_camera,
                                "mm_per_unit": start.mm_per_unit}))
-        probe = None
         speculative = None
         try:
             version = _in_background(povray_version)
@@ -420,11 +419,10 @@ def convert(opts: ConvertOptions, render_early=None) -> dict:
                     _note(decision, "(the mesh render started while the probe ran was "
                                     "stopped)")
         except BaseException:
-            if probe is None:
-                try:
-                    probe = probe_started()
-                except BaseException:
-                    probe = None
+            try:
+                probe = probe_started()                   # the same probe, or its start error
+            except BaseException:
+                probe = None                              # never started: nothing to stop
             if probe is not None:
                 probe.cancel()
             if speculative is not None:
