@@ -23,9 +23,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from povlens.convert import ConvertOptions, convert
-from povlens.render import composite_outdir, lens_for, pupil_table_for, render_outdir, render_view
-from povlens.convert import read_plan
+from povlens.plan.convert import ConvertOptions, convert
+from povlens.render.samples import composite_outdir, lens_for, pupil_table_for, render_outdir, render_view
+from povlens.plan.convert import read_plan
 
 ROOT = Path(__file__).resolve().parent.parent
 

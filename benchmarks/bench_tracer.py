@@ -18,10 +18,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from povlens.focus import thick_lens_film_distance_mm  # noqa: E402
-from povlens.prescription import read_lens  # noqa: E402
-from povlens.reference_tracer import trace_rays_from_film as reference_trace  # noqa: E402
-from povlens.tracer import trace_from_film  # noqa: E402
+from povlens.lens.focus import thick_lens_film_distance_mm  # noqa: E402
+from povlens.lens.prescription import read_lens  # noqa: E402
+from povlens.lens.reference_tracer import trace_rays_from_film as reference_trace  # noqa: E402
+from povlens.lens.tracer import trace_from_film  # noqa: E402
 
 
 def make_rays(lens, film_distance_mm, n, seed=0):

@@ -1,3 +1,3 @@
-from .cli import main
+from povlens.cli import main
 
 raise SystemExit(main())

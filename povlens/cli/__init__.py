@@ -12,7 +12,7 @@ import argparse
 import importlib
 import sys
 
-from ..errors import PovlensError
+from povlens.errors import PovlensError
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ["inspect", "focus", "trace", "check", "plan", "render", "pupil", "compare", "bench", "report"]
@@ -30,7 +30,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         prog="povlens",
         description="Real camera lenses for POV-Ray: inspect and focus lens prescriptions, "
                     "trace rays, build exit-pupil tables, and render POV-Ray scenes through them.")
-    from .. import __version__
+    from povlens import __version__
     parser.add_argument("--version", action="version", version=f"povlens {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import UsageError
-from .common import positive_float, positive_int
+from povlens.errors import UsageError
+from povlens.cli.common import positive_float, positive_int
 
 
 def _counts(text: str) -> tuple[int, ...]:
@@ -21,7 +21,7 @@ def _counts(text: str) -> tuple[int, ...]:
 
 
 def register(sub) -> None:
-    from .. import bench
+    from povlens.bench import time_error as bench
     p = sub.add_parser(
         "bench", help="measure run time against error: naive, pbrt-box and povlens lens "
                       "sampling, and focal_blur",
@@ -59,7 +59,7 @@ def register(sub) -> None:
 
 
 def run_auto(args) -> int:
-    from ..bench_auto import AutoBenchSettings, run_auto_bench, SCENE_FOCUS
+    from povlens.bench.auto import AutoBenchSettings, run_auto_bench, SCENE_FOCUS
     kw = {}
     if args.quick:
         kw.update(lenses=("telephoto.250mm",), scenes=("paper",), width=48, height=36,
@@ -92,7 +92,7 @@ def run_auto(args) -> int:
 def run(args) -> int:
     if args.auto:
         return run_auto(args)
-    from ..bench import full_settings, quick_settings
+    from povlens.bench.time_error import full_settings, quick_settings
     kw = {}
     for name in ("scene", "focus", "samples", "reference_samples", "width", "height", "jobs",
                  "pbrt_rays", "tracer_rays", "out", "keep"):
@@ -106,7 +106,7 @@ def run(args) -> int:
     if args.tracer_rays is not None and args.tracer_rays < 0:
         raise UsageError("--tracer-rays: must not be negative")
     settings = (quick_settings if args.quick else full_settings)(**kw)
-    from ..bench import run_bench
+    from povlens.bench.time_error import run_bench
     _, summary = run_bench(settings)
     print(summary)
     print(f"\nwrote {settings.out}/{settings.name}.csv, .png, .txt")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 
-from ..focus import thick_lens_film_distance_mm, to_mm
-from .common import add_lens_arguments, distance, load_lens, positive_float, print_json
+from povlens.lens.focus import thick_lens_film_distance_mm, to_mm
+from povlens.cli.common import add_lens_arguments, distance, load_lens, positive_float, print_json
 
 
 def register(sub) -> None:
@@ -29,7 +29,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..check import check_lens
+    from povlens.lens.check import check_lens
     lens = load_lens(args)
     film = args.film_distance
     if film is None:

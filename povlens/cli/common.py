@@ -7,9 +7,9 @@ import json
 import math
 import sys
 
-from ..errors import UsageError
-from ..paraxial import stopped_down
-from ..prescription import LensPrescription, read_lens
+from povlens.errors import UsageError
+from povlens.lens.paraxial import stopped_down
+from povlens.lens.prescription import LensPrescription, read_lens
 
 
 def add_lens_arguments(p: argparse.ArgumentParser) -> None:

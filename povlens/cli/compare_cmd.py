@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..compare import PSNR_PEAK, CompareError, compare_arrays, difference_magnitude, false_colour
-from ..images import ImageError, read_image
-from .common import positive_float, print_json
+from povlens.report.compare import PSNR_PEAK, CompareError, compare_arrays, difference_magnitude, false_colour
+from povlens.util.images import ImageError, read_image
+from povlens.cli.common import positive_float, print_json
 
 
 def register(sub) -> None:
@@ -35,7 +35,7 @@ def register(sub) -> None:
 def _write_colour(path: Path, rgb: np.ndarray) -> None:
     import OpenImageIO as oiio
 
-    from ..povray import atomic_output
+    from povlens.pov.process import atomic_output
     h, w, _ = rgb.shape
     spec = oiio.ImageSpec(w, h, 3, oiio.FLOAT)
     spec.channelnames = ("R", "G", "B")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 
-from ..focus import UNITS_MM, focus, to_mm
-from .common import add_lens_arguments, distance, load_lens, print_json
+from povlens.lens.focus import UNITS_MM, focus, to_mm
+from povlens.cli.common import add_lens_arguments, distance, load_lens, print_json
 
 
 def register(sub) -> None:

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 
-from ..paraxial import paraxial_data
-from .common import add_lens_arguments, load_lens, print_json
+from povlens.lens.paraxial import paraxial_data
+from povlens.cli.common import add_lens_arguments, load_lens, print_json
 
 
 def register(sub) -> None:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 import tempfile
 
-from ..convert import _sanitize, convert
-from .common import print_json
-from .render_cmd import _add_convert_arguments, options_from_args
+from povlens.plan.convert import _sanitize, convert
+from povlens.cli.common import print_json
+from povlens.cli.render_cmd import _add_convert_arguments, options_from_args
 
 
 def register(sub) -> None:

@@ -10,13 +10,13 @@ import time
 
 import numpy as np
 
-from ..errors import UsageError
-from ..film import parse_film_size
-from ..focus import UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_mm
-from ..paraxial import paraxial_data
-from ..pupil import DEFAULT_TOLERANCE, build_pupil_table, load_if_current, plot_pupil_shapes
-from ..pupil_baselines import PBRT_INTERVALS, PBRT_RAYS_PER_INTERVAL, NaiveRearElement, PbrtBoxes
-from .common import add_lens_arguments, load_lens, positive_float, positive_int, print_json
+from povlens.errors import UsageError
+from povlens.lens.film import parse_film_size
+from povlens.lens.focus import UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_mm
+from povlens.lens.paraxial import paraxial_data
+from povlens.pupil.table import DEFAULT_TOLERANCE, build_pupil_table, load_if_current, plot_pupil_shapes
+from povlens.pupil.baselines import PBRT_INTERVALS, PBRT_RAYS_PER_INTERVAL, NaiveRearElement, PbrtBoxes
+from povlens.cli.common import add_lens_arguments, load_lens, positive_float, positive_int, print_json
 
 
 def register(sub) -> None:

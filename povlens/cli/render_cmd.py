@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import os
 
-from ..convert import METHODS, ConvertOptions, convert
-from ..errors import UsageError
-from ..film import parse_film_size
-from ..focus import UNITS_MM
-from .common import positive_float, print_json
+from povlens.plan.convert import METHODS, ConvertOptions, convert
+from povlens.errors import UsageError
+from povlens.lens.film import parse_film_size
+from povlens.lens.focus import UNITS_MM
+from povlens.cli.common import positive_float, print_json
 
 
 def _vector(text: str):
@@ -135,7 +135,7 @@ def _unwind_on_sigterm() -> None:
 
 
 def run_render(args) -> int:
-    from ..render import convert_and_render
+    from povlens.render.samples import convert_and_render
     _unwind_on_sigterm()
     _, out = convert_and_render(options_from_args(args), jobs=args.jobs, quiet=args.quiet,
                                 on_plan=None if args.quiet else
@@ -146,20 +146,20 @@ def run_render(args) -> int:
 
 
 def run_composite(args) -> int:
-    from ..render import composite_outdir
+    from povlens.render.samples import composite_outdir
     composite_outdir(args.outdir)
     return 0
 
 
 def run_batch(args) -> int:
-    from ..render import render_batch
+    from povlens.render.samples import render_batch
     _unwind_on_sigterm()
     render_batch(args.outdir, args.batch, in_flight=args.in_flight)
     return 0
 
 
 def run_view(args) -> int:
-    from ..render import render_view
+    from povlens.render.samples import render_view
     render_view(args.outdir, args.view)
     return 0
 

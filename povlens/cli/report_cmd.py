@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..errors import UsageError
+from povlens.errors import UsageError
 
 
 def register(sub) -> None:
@@ -23,7 +23,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..report import make_report
+    from povlens.report.html import make_report
     if not args.output.lower().endswith((".html", ".htm")):
         raise UsageError(f"-o {args.output}: the report is HTML; name it e.g. report.html")
     path = make_report(args.outdirs, args.output, render_missing=not args.no_render)

@@ -7,9 +7,9 @@ import sys
 
 import numpy as np
 
-from ..errors import UsageError
-from ..tracer import trace_from_film
-from .common import add_lens_arguments, load_lens, positive_float, print_json
+from povlens.errors import UsageError
+from povlens.lens.tracer import trace_from_film
+from povlens.cli.common import add_lens_arguments, load_lens, positive_float, print_json
 
 
 def register(sub) -> None:

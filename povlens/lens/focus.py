@@ -1,0 +1,188 @@
+"""Focusing: the film distance (rear vertex to film) for an object distance.
+
+Object distances are measured from the film plane, as on a lens barrel
+(pbrt's ``focusdistance``).  Two answers:
+
+* **thick lens** — the Gaussian equation about the principal planes,
+  ``1/u + 1/v = 1/f`` with u from H and v from H' (pbrt's ``FocusThickLens``,
+  pbrt-v4 ``cameras.cpp``).  With L = D - T + z_H - z_H' (object-to-film
+  distance less the track and the hiatus), v is the smaller root of
+  ``v^2 - L v + f L = 0``, which exists only for L >= 4 f.
+* **exact** — the film distance that minimises the RMS spot radius on the film
+  of a bundle of real rays from the on-axis object point, spread evenly over
+  the entrance pupil and traced through the real, stopped lens (rays the lens
+  blocks are left out).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from povlens.errors import OpticsError, UsageError
+from povlens.lens.paraxial import ParaxialData, paraxial_data
+from povlens.lens.prescription import LensPrescription
+from povlens.lens.tracer import trace_from_scene
+
+__all__ = ["FocusResult", "thick_lens_film_distance_mm", "closest_focus_distance_mm",
+           "exact_film_distance_mm", "focus", "UNITS_MM", "to_mm"]
+
+UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+
+
+def to_mm(value: float, units: str) -> float:
+    """Convert ``value`` in ``units`` (mm, cm, m, in) to millimetres; inf stays inf."""
+    try:
+        return float(value) * UNITS_MM[units]
+    except KeyError:
+        raise UsageError(f"--units {units}: unknown unit", "use one of mm, cm, m, in") from None
+
+
+def _hiatus_terms(p: ParaxialData) -> float:
+    # z_H (from front vertex) - z_H' (from rear vertex), both + toward the film.
+    return p.principal_front - p.principal_rear_from_rear_vertex
+
+
+def closest_focus_distance_mm(lens: LensPrescription, p: ParaxialData | None = None) -> float:
+    """Closest object distance (from the film) the thick-lens model can focus: L = 4 f."""
+    p = p or paraxial_data(lens)
+    return 4.0 * p.efl + p.total_track - _hiatus_terms(p)
+
+
+def thick_lens_film_distance_mm(lens: LensPrescription, distance_mm: float,
+                                p: ParaxialData | None = None) -> float:
+    """Film distance (rear vertex to film, mm) focusing an object ``distance_mm``
+    from the film, by the thick-lens equation.  inf focuses at infinity."""
+    p = p or paraxial_data(lens)
+    if math.isinf(distance_mm):
+        return p.bfl
+    f = p.efl
+    L = distance_mm - p.total_track + _hiatus_terms(p)
+    disc = L * L - 4.0 * f * L
+    if not (L > 0 and disc >= 0):
+        raise OpticsError(
+            f"cannot focus {lens.source} at {distance_mm:g} mm from the film: the object is "
+            f"inside the closest focus distance",
+            f"the closest distance that works is {closest_focus_distance_mm(lens, p):.6g} mm "
+            f"(object to film)")
+    # Smaller root, written without cancellation: v = 2 f L / (L + sqrt(L^2 - 4 f L)).
+    v = 2.0 * f * L / (L + math.sqrt(disc))
+    return v + p.principal_rear_from_rear_vertex
+
+
+def pupil_disc_points(n_rings: int) -> np.ndarray:
+    """Points (m, 2) spread evenly over the unit disc: ring k at radius (k - 1/2)/n
+    with 6k points, so every point stands for about the same area."""
+    pts = []
+    for k in range(1, n_rings + 1):
+        r = (k - 0.5) / n_rings
+        m = 6 * k
+        a = (np.arange(m) + 0.5 * (k % 2)) * 2 * math.pi / m
+        pts.append(np.stack([r * np.cos(a), r * np.sin(a)], axis=1))
+    return np.concatenate(pts)
+
+
+def rms_spot_mm(lens: LensPrescription, film_distance_mm: float, distance_mm: float,
+                p: ParaxialData | None = None, n_rings: int = 16, pupil_fill: float = 1.0
+                ) -> tuple[float, int]:
+    """RMS radius (mm) on the film of an axial object's bundle; and how many rays passed."""
+    p = p or paraxial_data(lens)
+    disc = pupil_disc_points(n_rings) * (0.5 * p.entrance_pupil_diameter * pupil_fill)
+    front_z = film_distance_mm + p.total_track
+    ep_z = front_z - p.entrance_pupil_position
+    if math.isinf(distance_mm):
+        origin = np.column_stack([disc, np.full(len(disc), front_z + 1.0)])
+        direction = np.tile([0.0, 0.0, -1.0], (len(disc), 1))
+    else:
+        origin = np.tile([0.0, 0.0, distance_mm], (len(disc), 1))
+        target = np.column_stack([disc, np.full(len(disc), ep_z)])
+        direction = target - origin
+    r = trace_from_scene(lens, film_distance_mm, origin, direction)
+    o, d = r.origin_mm[r.passed], r.direction[r.passed]
+    if len(o) < 3:
+        return math.inf, int(len(o))
+    t = -o[:, 2] / d[:, 2]
+    xy = o[:, :2] + t[:, None] * d[:, :2]
+    return float(np.sqrt(np.mean(np.sum(xy * xy, axis=1)))), int(len(o))
+
+
+def exact_film_distance_mm(lens: LensPrescription, distance_mm: float,
+                           p: ParaxialData | None = None, start_mm: float | None = None
+                           ) -> tuple[float, float]:
+    """Film distance minimising the real-ray RMS spot of the axial object point.
+
+    Returns (film distance in mm, RMS spot radius in mm there).
+    """
+    p = p or paraxial_data(lens)
+    start = start_mm if start_mm is not None else thick_lens_film_distance_mm(lens, distance_mm, p)
+    if not (start > 0 and math.isfinite(start)):
+        # A diverging lens (or an object too close): the image is virtual, in front of
+        # the rear vertex, and no film position behind the lens can receive it.
+        raise OpticsError(f"{lens.source}: the image of an object at {distance_mm:g} mm lies "
+                          f"{start:.6g} mm from the rear vertex (not behind the lens); no film "
+                          f"distance focuses it", "a lens with positive power is needed")
+    half = max(0.02 * abs(start), 0.01 * p.efl, 0.1)
+    limit = max(abs(start), p.efl)
+    while True:
+        lo, hi = max(start - half, 1e-6), start + half
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            raise OpticsError(f"{lens.source}: the focus for {distance_mm:g} mm lies too far "
+                              f"from the lens ({start:.6g} mm) to search with real rays")
+        res = minimize_scalar(lambda f: rms_spot_mm(lens, f, distance_mm, p)[0],
+                              bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-9 * max(1.0, start), "maxiter": 300})
+        best = float(res.x)
+        at_edge = min(best - lo, hi - best) < 1e-3 * half
+        if not at_edge or half >= limit:
+            break
+        half *= 4.0  # the minimum lies outside: widen the bracket around the thick-lens focus
+    spot, n = rms_spot_mm(lens, best, distance_mm, p)
+    if not math.isfinite(spot):
+        raise OpticsError(f"{lens.source}: no real ray from the object at {distance_mm:g} mm "
+                          f"reaches the film; cannot focus with real rays",
+                          "check the stop diameter (--stop-diameter / --f-number)")
+    if at_edge:
+        raise OpticsError(f"{lens.source}: the real-ray focus for {distance_mm:g} mm lies more "
+                          f"than {half:.3g} mm from the thick-lens focus; the lens is too "
+                          f"aberrated to focus by RMS spot",
+                          "stop the lens down (--f-number) and try again")
+    return best, spot
+
+
+@dataclasses.dataclass(frozen=True)
+class FocusResult:
+    """Focus of a lens for an object distance (all mm)."""
+
+    distance_mm: float
+    thick_lens_film_distance_mm: float
+    exact_film_distance_mm: float
+    exact_rms_spot_mm: float
+    thick_lens_rms_spot_mm: float
+    closest_focus_mm: float
+
+    def to_dict(self) -> dict:
+        def num(v):
+            return v if math.isfinite(v) else None
+        return {
+            "distance_mm": num(self.distance_mm),
+            "film_distance_mm": {"thick_lens": self.thick_lens_film_distance_mm,
+                                 "exact": self.exact_film_distance_mm},
+            "rms_spot_mm": {"thick_lens": num(self.thick_lens_rms_spot_mm),
+                            "exact": num(self.exact_rms_spot_mm)},
+            "closest_focus_mm": self.closest_focus_mm,
+        }
+
+
+def focus(lens: LensPrescription, distance_mm: float) -> FocusResult:
+    """Thick-lens and exact real-ray focus for an object ``distance_mm`` from the film."""
+    if not (distance_mm > 0):
+        raise UsageError(f"--distance {distance_mm:g}: the object distance must be positive")
+    p = paraxial_data(lens)
+    thick = thick_lens_film_distance_mm(lens, distance_mm, p)
+    exact, spot = exact_film_distance_mm(lens, distance_mm, p, thick)
+    return FocusResult(float(distance_mm), float(thick), float(exact), float(spot),
+                       float(rms_spot_mm(lens, thick, distance_mm, p)[0]),
+                       float(closest_focus_distance_mm(lens, p)))

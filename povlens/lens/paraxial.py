@@ -1,0 +1,229 @@
+"""First-order (paraxial) optics by ray-transfer matrices.
+
+Rays are meridional pairs (y, n u): height y in mm and reduced angle n u
+(refractive index times the slope dy/ds), travelling from the scene (front
+vertex) to the film.  Each surface of curvature c between indices n and n'
+refracts with ``R = [[1, 0], [-(n' - n) c, 1]]``; a gap of thickness t in index
+n' transfers with ``T = [[1, t / n'], [0, 1]]`` (Hecht, *Optics*, §6.2; the
+y-nu method of Smith, *Modern Optical Engineering*, ch. 3).  The system matrix
+from the front vertex to the rear vertex, ``[[A, B], [C, D]]``, gives
+
+    EFL = -1/C,   BFL = -A/C (rear vertex to rear focal point),
+    FFL = -D/C (front focal point in front of the front vertex).
+
+Positions below are signed along the axis in mm, positive toward the film,
+measured from the vertex named in each field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from povlens.errors import OpticsError, UsageError
+from povlens.lens.prescription import LensPrescription
+
+__all__ = ["ParaxialData", "paraxial_data", "system_matrix", "axial_ray_heights",
+           "stop_index", "stopped_down", "lensmaker_focal_length_mm", "image_of_object"]
+
+
+def _refraction(c: float, n: float, n_after: float) -> np.ndarray:
+    return np.array([[1.0, 0.0], [-(n_after - n) * c, 1.0]])
+
+
+def _transfer(t: float, n: float) -> np.ndarray:
+    return np.array([[1.0, t / n], [0.0, 1.0]])
+
+
+def system_matrix(lens: LensPrescription, first: int = 0, last: int | None = None,
+                  include_last_refraction: bool = True) -> np.ndarray:
+    """2x2 matrix from just before surface ``first`` to just after surface ``last``.
+
+    With ``include_last_refraction=False`` the matrix ends on the plane of
+    surface ``last`` before it refracts (used to reach the stop plane).
+    """
+    last = lens.n_surfaces - 1 if last is None else last
+    c = lens.curvature_per_mm
+    nb, na = lens.index_before, lens.index_after
+    m = np.eye(2)
+    for i in range(first, last + 1):
+        if i > first:
+            m = _transfer(lens.thickness_mm[i - 1], nb[i]) @ m
+        if i < last or include_last_refraction:
+            m = _refraction(c[i], nb[i], na[i]) @ m
+    return m
+
+
+def axial_ray_heights(lens: LensPrescription) -> np.ndarray:
+    """Heights (mm) at every surface of the paraxial ray entering parallel at y = 1."""
+    c = lens.curvature_per_mm
+    nb, na = lens.index_before, lens.index_after
+    y, nu = 1.0, 0.0
+    out = np.empty(lens.n_surfaces)
+    for i in range(lens.n_surfaces):
+        if i > 0:
+            y += lens.thickness_mm[i - 1] * nu / nb[i]
+        out[i] = y
+        nu -= y * (na[i] - nb[i]) * c[i]
+    return out
+
+
+def _limiting_surface(lens: LensPrescription, candidates: np.ndarray) -> int:
+    h = np.abs(axial_ray_heights(lens))
+    ratio = np.where(candidates & (h > 0), lens.aperture_radius_mm / np.where(h > 0, h, 1.0),
+                     np.inf)
+    return int(np.argmin(ratio))
+
+
+def stop_index(lens: LensPrescription) -> int:
+    """Row of the aperture stop (0-based).
+
+    Among aperture rows (planes in air), the one that limits the axial beam of
+    an object at infinity; with no aperture row, the surface that limits it.
+    """
+    ap = lens.is_aperture
+    return _limiting_surface(lens, ap if ap.any() else np.ones(lens.n_surfaces, bool))
+
+
+@dataclasses.dataclass(frozen=True)
+class ParaxialData:
+    """First-order data of a lens, object at infinity unless stated (mm)."""
+
+    efl: float
+    bfl: float                      # rear vertex -> rear focal point
+    ffl: float                      # front focal point in front of the front vertex
+    front_focal_point: float        # from the front vertex, + toward the film (= -ffl)
+    rear_focal_point: float         # from the rear vertex, + toward the film (= bfl)
+    principal_front: float          # H, from the front vertex, + toward the film
+    principal_rear: float           # H', from the front vertex, + toward the film
+    principal_rear_from_rear_vertex: float
+    entrance_pupil_position: float  # from the front vertex, + toward the film
+    entrance_pupil_diameter: float
+    exit_pupil_position: float      # from the rear vertex, + toward the film
+    exit_pupil_diameter: float
+    f_number: float                 # EFL / entrance-pupil diameter
+    stop_index: int
+    stop_is_aperture: bool          # False: a lens rim is the stop
+    limiting_index: int             # surface that limits the axial beam
+    stop_diameter: float
+    total_track: float
+
+    def to_dict(self) -> dict:
+        return {
+            "efl": self.efl, "bfl": self.bfl, "ffl": self.ffl, "f_number": self.f_number,
+            "focal_points": {"front": self.front_focal_point, "rear": self.rear_focal_point},
+            "principal_planes": {"front": self.principal_front, "rear": self.principal_rear},
+            "entrance_pupil": {"position": self.entrance_pupil_position,
+                               "diameter": self.entrance_pupil_diameter},
+            "exit_pupil": {"position": self.exit_pupil_position,
+                           "diameter": self.exit_pupil_diameter},
+            "stop_index": self.stop_index, "stop_is_aperture": self.stop_is_aperture,
+            "limiting_index": self.limiting_index, "stop_diameter": self.stop_diameter,
+            "total_track": self.total_track,
+        }
+
+
+def paraxial_data(lens: LensPrescription) -> ParaxialData:
+    """Cardinal points, pupils and f-number of ``lens`` (its current stop)."""
+    (a, b), (c, d) = system_matrix(lens)
+    if c == 0.0:
+        raise OpticsError(f"{lens.source}: the lens is afocal (zero power); it cannot form an "
+                          f"image on film")
+    efl, bfl, ffl = -1.0 / c, -a / c, -d / c
+    track = lens.total_track_mm
+    s = stop_index(lens)
+    limiting = _limiting_surface(lens, np.ones(lens.n_surfaces, bool))
+
+    # Entrance pupil: the stop imaged backwards through the surfaces before it.
+    (sa, sb), _ = system_matrix(lens, 0, s, include_last_refraction=False)
+    ep_pos = sb / sa if sa != 0 else math.inf
+    # Exit pupil: the stop imaged through the surfaces after it; the chief ray
+    # leaves the stop centre
+    # (including the rim's own refraction when a lens rim is the stop).
+    m_after = system_matrix(lens, s, None)
+    (xa, xb), (xc, xd) = m_after
+    xp_pos = -xb / xd if xd != 0 else math.inf
+    stop_d = float(lens.aperture_diameter_mm[s])
+    # Pupils are the paraxial images of the stop (the optical-design convention,
+    # and pbrt's); a rim that clips the axial beam first is reported separately
+    # as ``limiting_index``.
+    epd = stop_d / abs(sa) if sa != 0 else math.inf
+    xp_d = stop_d / abs(xd) if xd != 0 else math.inf
+    h_rear = track + bfl - efl  # H' from the front vertex
+    efl, bfl, ffl, ep_pos, xp_pos, epd, xp_d = map(
+        float, (efl, bfl, ffl, ep_pos, xp_pos, epd, xp_d))
+    return ParaxialData(
+        efl=efl, bfl=bfl, ffl=ffl, front_focal_point=-ffl, rear_focal_point=bfl,
+        principal_front=efl - ffl, principal_rear=h_rear,
+        principal_rear_from_rear_vertex=bfl - efl,
+        entrance_pupil_position=ep_pos, entrance_pupil_diameter=epd,
+        exit_pupil_position=xp_pos, exit_pupil_diameter=xp_d,
+        f_number=efl / epd, stop_index=s, stop_is_aperture=bool(lens.is_aperture[s]),
+        limiting_index=limiting, stop_diameter=stop_d, total_track=track)
+
+
+def stopped_down(lens: LensPrescription, *, stop_diameter_mm: float | None = None,
+                 f_number: float | None = None) -> LensPrescription:
+    """A copy of ``lens`` with its aperture stop set by diameter or f-number.
+
+    The stop cannot open beyond the diameter in the file.  Raises UsageError
+    with the allowed range otherwise.
+    """
+    if stop_diameter_mm is None and f_number is None:
+        return lens
+    if stop_diameter_mm is not None and f_number is not None:
+        raise UsageError("give either --f-number or --stop-diameter, not both")
+    s = stop_index(lens)
+    if not lens.is_aperture[s]:
+        raise UsageError(f"{lens.source}: the lens has no aperture row to stop down (its beam is "
+                         f"limited by {lens.row_label(s)})",
+                         "add an aperture row 'radius 0, thickness, index 0, diameter' to the file")
+    max_d = lens.max_stop_diameter_mm or float(lens.aperture_diameter_mm[s])
+    if f_number is not None:
+        if not (f_number > 0 and math.isfinite(f_number)):
+            raise UsageError(f"--f-number {f_number}: must be a positive number")
+        full = paraxial_data(lens.with_aperture_diameter(s, max_d))
+        (sa, _), _ = system_matrix(lens, 0, s, include_last_refraction=False)
+        stop_diameter_mm = full.efl / f_number * abs(sa)
+        if stop_diameter_mm > max_d * (1 + 1e-12):
+            raise UsageError(f"--f-number {f_number:g}: {lens.source} opens only to "
+                             f"F/{full.f_number:.3g}",
+                             f"use --f-number {math.ceil(full.f_number * 100) / 100:g} or more")
+        stop_diameter_mm = min(stop_diameter_mm, max_d)
+    if not (stop_diameter_mm > 0 and math.isfinite(stop_diameter_mm)):
+        raise UsageError(f"--stop-diameter {stop_diameter_mm}: must be a positive number of mm")
+    if stop_diameter_mm > max_d * (1 + 1e-12):
+        raise UsageError(f"--stop-diameter {stop_diameter_mm:g} mm: the stop of {lens.source} "
+                         f"opens only to {max_d:g} mm")
+    return lens.with_aperture_diameter(s, stop_diameter_mm)
+
+
+def image_of_object(lens: LensPrescription, object_distance_from_front_vertex_mm: float
+                    ) -> tuple[float, float]:
+    """Paraxial image of an axial object ``d`` mm in front of the front vertex.
+
+    Returns (image distance from the rear vertex, + toward the film; lateral
+    magnification).  d = inf gives (BFL, 0).
+    """
+    (a, b), (c, d) = system_matrix(lens)
+    dist = object_distance_from_front_vertex_mm
+    if math.isinf(dist):
+        return -a / c, 0.0
+    denom = c * dist + d
+    if denom == 0:
+        return math.inf, math.inf
+    z = -(a * dist + b) / denom
+    return z, a + c * z
+
+
+def lensmaker_focal_length_mm(r1_mm: float, r2_mm: float, thickness_mm: float, n: float) -> float:
+    """Lensmaker's equation for a thick singlet in air (R = 0 or inf: flat face).
+
+    1/f = (n - 1) [1/R1 - 1/R2 + (n - 1) t / (n R1 R2)]
+    """
+    c1 = 0.0 if r1_mm in (0, math.inf) else 1.0 / r1_mm
+    c2 = 0.0 if r2_mm in (0, math.inf) else 1.0 / r2_mm
+    power = (n - 1.0) * (c1 - c2 + (n - 1.0) * thickness_mm * c1 * c2 / n)
+    return 1.0 / power

@@ -1,0 +1,326 @@
+"""Lens prescriptions: reading, validating and writing Kolb/pbrt lens files.
+
+File format (pbrt / Kolb et al. 1995), one row per surface, object side first:
+
+    radius_mm  thickness_mm  index_after  aperture_diameter_mm  [abbe_vd]
+
+* ``radius`` is signed; R > 0 puts the centre of curvature on the film side.
+  R = 0 is a plane: an *aperture* when there is air on both sides, otherwise a
+  flat refracting face (pbrt cannot express the latter; povlens can).
+* ``thickness`` is the axial distance to the next vertex; the last row's value is
+  the distance to the film and is replaced when the lens is focused.
+* ``index_after`` is the refractive index (d line) after the surface; 0 means air.
+* ``aperture_diameter`` is the clear diameter (for an aperture: its maximum).
+* An optional 5th column carries the Abbe number V_d of the medium after the
+  surface (kept for dispersion; 0 = unknown).
+* ``#`` starts a comment anywhere on a line; tabs or spaces; LF or CRLF.
+
+The old Kolb / CS348B tables (100 mm scale: ``dgauss.dat``, ``wide.dat``) store
+in column 2 the distance from the *previous* vertex.  They are recognised by the
+rule of ``../shared/reference/realistic-camera.md`` §1.3 (first row's column 2
+is 0 and the last row's is not) and converted on reading: ``t[i] = axpos[i+1]``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from povlens.errors import LensFileError
+
+__all__ = ["LensPrescription", "read_lens", "parse_lens_text", "write_lens", "format_lens",
+           "sag_mm", "resolve_lens_path"]
+
+AIR = 1.0
+#: Surfaces may touch (files round data to ~6 digits) but not cross by more than this.
+CROSSING_TOLERANCE_MM = 1e-5
+#: Supported magnitudes of non-zero radii and aperture diameters, and the largest
+#: thickness (mm), and the largest refractive index.
+MIN_LENGTH_MM, MAX_LENGTH_MM = 1e-6, 1e20
+MAX_INDEX = 10.0
+
+
+def sag_mm(curvature_per_mm: float | np.ndarray, r_mm: np.ndarray) -> np.ndarray:
+    """Sag s(r) = c r^2 / (1 + sqrt(1 - c^2 r^2)) of the vertex branch, in mm.
+
+    Stable for c -> 0 (no cancellation).  Where c^2 r^2 > 1 the surface does not
+    exist; the result there is +inf in magnitude's sign of c (callers check).
+    """
+    c = np.asarray(curvature_per_mm, dtype=np.float64)
+    r2 = np.asarray(r_mm, dtype=np.float64) ** 2
+    arg = 1.0 - c * c * r2
+    with np.errstate(invalid="ignore"):
+        root = np.sqrt(np.maximum(arg, 0.0))
+    return c * r2 / (1.0 + root)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class LensPrescription:
+    """A lens system as read from a prescription file.
+
+    All arrays have shape (n_surfaces,), float64, object side first.
+
+    Attributes
+    ----------
+    radius_mm : signed radii of curvature; 0 = plane.
+    thickness_mm : axial distance to the next vertex (last entry: as in the file).
+    index_after : refractive index after each surface; air is stored as 1.0.
+    aperture_diameter_mm : clear-aperture diameters (for an aperture stop: its
+        current diameter, see :meth:`with_stop_diameter`).
+    abbe_vd : Abbe numbers of the medium after each surface, 0 = unknown.
+    source : the file it came from (or a label).
+    lines : 1-based line number of each row in the source (0 if not from a file).
+    file_format : ``"pbrt"`` or ``"kolb-axpos"`` (converted on reading).
+    comments : the comment lines of the file header.
+    """
+
+    radius_mm: np.ndarray
+    thickness_mm: np.ndarray
+    index_after: np.ndarray
+    aperture_diameter_mm: np.ndarray
+    abbe_vd: np.ndarray
+    source: str = "<memory>"
+    lines: tuple[int, ...] = ()
+    file_format: str = "pbrt"
+    comments: tuple[str, ...] = ()
+    max_stop_diameter_mm: float | None = None
+
+    # ----- derived geometry ------------------------------------------------
+    @property
+    def n_surfaces(self) -> int:
+        return int(self.radius_mm.shape[0])
+
+    @property
+    def curvature_per_mm(self) -> np.ndarray:
+        """c = 1/R (1/mm); 0 for planes."""
+        r = self.radius_mm
+        with np.errstate(divide="ignore"):
+            return np.where(r == 0.0, 0.0, 1.0 / np.where(r == 0.0, 1.0, r))
+
+    @property
+    def index_before(self) -> np.ndarray:
+        """Refractive index in front of each surface (scene side)."""
+        return np.concatenate(([AIR], self.index_after[:-1]))
+
+    @property
+    def is_aperture(self) -> np.ndarray:
+        """True for planar rows with air on both sides: apertures, which clip only."""
+        return (self.radius_mm == 0.0) & (self.index_before == AIR) & (self.index_after == AIR)
+
+    @property
+    def aperture_radius_mm(self) -> np.ndarray:
+        return 0.5 * self.aperture_diameter_mm
+
+    @property
+    def total_track_mm(self) -> float:
+        """Axial distance from the front vertex to the rear vertex."""
+        return float(np.sum(self.thickness_mm[:-1]))
+
+    def row_label(self, i: int) -> str:
+        line = self.lines[i] if i < len(self.lines) and self.lines[i] else None
+        return f"row {i}" + (f" (line {line})" if line else "")
+
+    def sha256(self) -> str:
+        """Hash of the optical content (not comments), for caching derived tables."""
+        h = hashlib.sha256()
+        for a in (self.radius_mm, self.thickness_mm, self.index_after, self.aperture_diameter_mm):
+            h.update(np.ascontiguousarray(a, dtype="<f8").tobytes())
+        return h.hexdigest()
+
+    # ----- modified copies ----------------------------------------------------
+    def replace(self, **changes) -> "LensPrescription":
+        return dataclasses.replace(self, **changes)
+
+    def with_aperture_diameter(self, row: int, diameter_mm: float) -> "LensPrescription":
+        d = self.aperture_diameter_mm.copy()
+        d[row] = diameter_mm
+        return self.replace(aperture_diameter_mm=d)
+
+    def __eq__(self, other) -> bool:  # optical equality, used by round-trip tests
+        if not isinstance(other, LensPrescription):
+            return NotImplemented
+        return all(np.array_equal(a, b) for a, b in (
+            (self.radius_mm, other.radius_mm), (self.thickness_mm, other.thickness_mm),
+            (self.index_after, other.index_after),
+            (self.aperture_diameter_mm, other.aperture_diameter_mm),
+            (self.abbe_vd, other.abbe_vd)))
+
+    __hash__ = None
+
+
+def resolve_lens_path(name: str | os.PathLike) -> Path:
+    """A lens path as given, or a bundled lens by file name or stem (``dgauss.50mm``)."""
+    p = Path(name)
+    if p.exists():
+        return p
+    bundled = Path(__file__).resolve().parents[2] / "lenses"
+    for cand in (bundled / p.name, bundled / f"{p.name}.dat"):
+        if cand.exists():
+            return cand
+    return p
+
+
+def read_lens(path: str | os.PathLike) -> LensPrescription:
+    """Read and validate a lens file.  Raises :class:`LensFileError` on bad input."""
+    p = resolve_lens_path(path)
+    try:
+        raw = p.read_bytes()
+    except FileNotFoundError:
+        raise LensFileError(path, None, "no such lens file",
+                            "give the path of a lens file, or the name of a bundled lens "
+                            "(see the lenses/ folder)") from None
+    except IsADirectoryError:
+        raise LensFileError(path, None, "is a directory, not a lens file") from None
+    except OSError as e:
+        raise LensFileError(path, None, f"cannot be read: {e.strerror}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    return parse_lens_text(text, str(p))
+
+
+def _parse_number(tok: str, source: str, line: int, column: str) -> float:
+    try:
+        v = float(tok)
+    except ValueError:
+        raise LensFileError(source, line, f"{column}: '{tok}' is not a number",
+                            "each row holds radius, thickness, index and aperture diameter "
+                            "(and optionally the Abbe number), separated by spaces or tabs; "
+                            "comments start with '#'") from None
+    if not math.isfinite(v):
+        raise LensFileError(source, line, f"{column}: '{tok}' is not a finite number")
+    return v
+
+
+_COLUMNS = ("radius", "thickness", "index", "aperture diameter", "Abbe number")
+
+
+def parse_lens_text(text: str, source: str = "<string>") -> LensPrescription:
+    """Parse the text of a lens file; ``source`` names it in error messages."""
+    rows: list[list[float]] = []
+    lines: list[int] = []
+    comments: list[str] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        body, sep, comment = line.partition("#")
+        toks = body.split()
+        if not toks:
+            if sep and not rows:
+                comments.append(comment.strip())
+            continue
+        if len(toks) not in (4, 5):
+            raise LensFileError(source, lineno,
+                                f"{len(toks)} columns; a row needs 4 (radius thickness index "
+                                f"aperture) or 5 (plus the Abbe number)")
+        rows.append([_parse_number(t, source, lineno, _COLUMNS[k]) for k, t in enumerate(toks)])
+        if len(toks) == 4:
+            rows[-1].append(0.0)
+        lines.append(lineno)
+    if not rows:
+        raise LensFileError(source, None, "contains no lens rows (empty file or only comments)",
+                            "a lens file needs one row per surface: radius thickness index aperture")
+
+    a = np.array(rows, dtype=np.float64)
+    radius, thick, index, diam, abbe = a.T.copy()
+    file_format = "pbrt"
+    if len(rows) > 1 and thick[0] == 0.0 and thick[-1] != 0.0:
+        # Old Kolb/CS348B table: column 2 is the distance from the previous vertex.
+        thick = np.append(thick[1:], 0.0)
+        file_format = "kolb-axpos"
+
+    for i, ln in enumerate(lines):
+        if diam[i] <= 0.0:
+            raise LensFileError(source, ln, f"aperture diameter {diam[i]:g} mm must be positive")
+        # Outside these ranges 1/R or the paraxial matrices overflow (e.g. R = 1e-320
+        # has an infinite curvature); no real lens comes near them.
+        for what, v in (("radius", radius[i]), ("aperture diameter", diam[i])):
+            if v != 0.0 and not MIN_LENGTH_MM <= abs(v) <= MAX_LENGTH_MM:
+                raise LensFileError(source, ln, f"{what} {v:g} mm is outside the supported "
+                                    f"range {MIN_LENGTH_MM:g} .. {MAX_LENGTH_MM:g} mm")
+        if abs(thick[i]) > MAX_LENGTH_MM:
+            raise LensFileError(source, ln, f"thickness {thick[i]:g} mm is larger than the "
+                                f"supported {MAX_LENGTH_MM:g} mm")
+        if index[i] > MAX_INDEX:
+            raise LensFileError(source, ln, f"index {index[i]:g} is above {MAX_INDEX:g}; no "
+                                f"optical medium has it")
+        if index[i] != 0.0 and index[i] < 1.0:
+            raise LensFileError(source, ln, f"index {index[i]:g} is below 1",
+                                "use the refractive index of the medium after the surface "
+                                "(0 or 1 for air)")
+        if thick[i] < 0.0 and i < len(rows) - 1:
+            raise LensFileError(source, ln, f"thickness {thick[i]:g} mm is negative",
+                                "column 2 is the axial distance to the next surface")
+        if abbe[i] < 0.0:
+            raise LensFileError(source, ln, f"Abbe number {abbe[i]:g} is negative")
+        if radius[i] != 0.0 and 0.5 * diam[i] > abs(radius[i]):
+            raise LensFileError(source, ln,
+                                f"clear aperture diameter {diam[i]:g} mm is larger than the "
+                                f"sphere of radius {abs(radius[i]):g} mm allows",
+                                "check the radius and aperture columns")
+    index = np.where(index == 0.0, AIR, index)
+    if index[-1] != AIR:
+        raise LensFileError(source, lines[-1], f"the medium after the last surface has index "
+                            f"{index[-1]:g}; the film must be in air (index 0 or 1)")
+
+    lens = LensPrescription(radius, thick, index, diam, abbe, source=source, lines=tuple(lines),
+                            file_format=file_format, comments=tuple(comments))
+    _check_surfaces_do_not_cross(lens)
+    ap = lens.is_aperture
+    if ap.any():
+        lens = lens.replace(max_stop_diameter_mm=float(np.max(diam[ap])))
+    return lens
+
+
+def _check_surfaces_do_not_cross(lens: LensPrescription) -> None:
+    """Neighbouring surfaces must not cross inside their common clear aperture."""
+    c = lens.curvature_per_mm
+    for i in range(lens.n_surfaces - 1):
+        rmax = min(lens.aperture_radius_mm[i], lens.aperture_radius_mm[i + 1])
+        r = np.linspace(0.0, rmax, 257)
+        gap = lens.thickness_mm[i] + sag_mm(c[i + 1], r) - sag_mm(c[i], r)
+        k = int(np.argmin(gap))
+        tol = CROSSING_TOLERANCE_MM
+        if gap[k] < -tol:
+            medium = "glass" if lens.index_after[i] != AIR else "air gap"
+            raise LensFileError(
+                lens.source, lens.lines[i + 1] if lens.lines else None,
+                f"surfaces {lens.row_label(i)} and {lens.row_label(i + 1)} cross inside their "
+                f"clear apertures (the {medium} is {gap[k]:.4g} mm thick at height {r[k]:.4g} mm): "
+                f"physically impossible",
+                f"increase the thickness on {lens.row_label(i)} or reduce the clear apertures")
+
+
+def format_lens(lens: LensPrescription) -> str:
+    """The lens as pbrt-format text (17 significant digits: reading it back is exact)."""
+    out = [f"# {c}" if c else "#" for c in lens.comments]
+    if lens.file_format != "pbrt":
+        out.append(f"# converted from {lens.file_format} format by povlens")
+    with_abbe = bool(np.any(lens.abbe_vd != 0.0))
+    out.append("# radius\tthickness\tindex\taperture" + ("\tabbe_vd" if with_abbe else ""))
+    for i in range(lens.n_surfaces):
+        n = 0.0 if lens.is_aperture[i] else lens.index_after[i]
+        cols = [lens.radius_mm[i], lens.thickness_mm[i], n, lens.aperture_diameter_mm[i]]
+        if with_abbe:
+            cols.append(lens.abbe_vd[i])
+        out.append("\t".join(f"{v:.17g}" for v in cols))
+    return "\n".join(out) + "\n"
+
+
+def write_lens(lens: LensPrescription, path: str | os.PathLike) -> None:
+    """Write ``lens`` to ``path`` atomically (temporary file, then rename)."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="\n") as f:
+            f.write(format_lens(lens))
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

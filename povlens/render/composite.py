@@ -1,0 +1,96 @@
+"""Averaging per-sample renders in linear light.
+
+Each lens sample is rendered to its own (linear, EXR) image; the final image
+is their mean, optionally weighted per pixel.  Images are read as float32 and
+summed in float64, so half-float EXRs never accumulate in half precision
+(reference §9.3).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Sequence
+
+import numpy as np
+
+from povlens.errors import PovlensError
+from povlens.util.images import read_image
+
+__all__ = ["composite"]
+
+
+def composite(
+    sample_paths: Sequence[str | os.PathLike],
+    weight_arrays: Sequence[np.ndarray] | None = None,
+    drop_top_rows: int = 0,
+) -> np.ndarray:
+    """Average sample images, returning float32 ``(H, W, C)`` linear light.
+
+    sample_paths : image files (K of them), all the same size ``(H + drop_top_rows, W)``
+        and channel count.
+    weight_arrays : None for the plain mean ``sum_k I_k / K``; otherwise K arrays of
+        shape ``(H, W)`` (after dropping rows) giving per-pixel weights ``w_k >= 0``,
+        and the result is ``sum_k w_k I_k / sum_k w_k``.  Pixels whose total weight is
+        0 come out as 0 (never NaN).
+    drop_top_rows : rows removed from the top of every image first (1 for the
+        POV-Ray 3.7.0.x mesh_camera row workaround, see
+        :func:`povlens.mesh_camera.render_size`).
+
+    Raises :class:`PovlensError` naming the offending file for unreadable
+    images, mismatched sizes or bad weights.
+    """
+    paths = list(sample_paths)
+    if not paths:
+        raise PovlensError("nothing to composite: no sample images were given")
+    drop = int(drop_top_rows)
+    if drop < 0:
+        raise PovlensError(f"drop_top_rows must be >= 0, got {drop_top_rows}")
+    weights = None
+    if weight_arrays is not None:
+        weights = list(weight_arrays)
+        if len(weights) != len(paths):
+            raise PovlensError(
+                f"composite: {len(paths)} sample images but {len(weights)} weight arrays"
+            )
+
+    total = None
+    wsum = None
+    shape = None
+    for k, p in enumerate(paths):
+        img = read_image(p)
+        if img.shape[0] <= drop:
+            raise PovlensError(
+                f"image {p} has only {img.shape[0]} rows; cannot drop {drop} top row(s)"
+            )
+        img = img[drop:]
+        if shape is None:
+            shape = img.shape
+            total = np.zeros(shape, dtype=np.float64)
+            if weights is not None:
+                wsum = np.zeros(shape[:2], dtype=np.float64)
+        elif img.shape != shape:
+            raise PovlensError(
+                f"image {p} has shape {img.shape} after dropping {drop} row(s), but "
+                f"{paths[0]} has {shape}",
+                "all samples of one composite must be rendered at the same size",
+            )
+        if weights is None:
+            total += img
+            continue
+        w = np.asarray(weights[k], dtype=np.float64)
+        if w.shape != shape[:2]:
+            raise PovlensError(
+                f"weight array {k} (for {p}) has shape {w.shape}, expected {shape[:2]}"
+            )
+        if not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise PovlensError(f"weight array {k} (for {p}) has negative or non-finite values")
+        total += w[:, :, None] * img
+        wsum += w
+
+    if weights is None:
+        out = total / len(paths)
+    else:
+        out = np.zeros_like(total)
+        nz = wsum > 0
+        out[nz] = total[nz] / wsum[nz][:, None]
+    return out.astype(np.float32)

@@ -1,0 +1,296 @@
+"""povlens.povray against the real POV-Ray (small images)."""
+
+from __future__ import annotations
+
+import re
+import os
+import shutil
+import time
+
+import numpy as np
+import pytest
+
+from povlens.pov import process as povray
+from povlens.errors import PovrayError, UsageError
+from povlens.util.images import read_image
+
+pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray is not installed")
+
+FLAT = """#version 3.7;
+global_settings { assumed_gamma 1.0 }
+camera { location <0, 0, -3> look_at 0 }
+plane { -z, 0 pigment { rgb 0.5 } finish { ambient 1 diffuse 0 } }
+"""
+
+
+@pytest.fixture
+def flat_scene(tmp_path):
+    p = tmp_path / "flat.pov"
+    p.write_text(FLAT)
+    return p
+
+
+def _leftovers(folder):
+    return sorted(p.name for p in folder.iterdir() if ".tmp" in p.name or p.suffix == ".log")
+
+
+def test_version_and_row_workaround():
+    v = povray.povray_version()
+    assert re.fullmatch(r"\d+(\.\d+)+", v)
+    assert povray.povray_version() is v  # cached
+    assert povray.needs_row_workaround("3.7.0.10")
+    assert povray.needs_row_workaround("3.7.0")
+    assert not povray.needs_row_workaround("3.7.1")
+    assert not povray.needs_row_workaround("3.8.0")
+
+
+def test_render_exr(flat_scene, tmp_path):
+    out = tmp_path / "out" / "flat.exr"
+    out.parent.mkdir()
+    assert povray.render(flat_scene, out, 16, 12) == out
+    img = read_image(out)
+    assert img.shape == (12, 16, 3)
+    np.testing.assert_allclose(img, 0.5, atol=1e-3)
+    assert _leftovers(tmp_path) == [] and _leftovers(out.parent) == []
+
+
+@pytest.mark.parametrize(
+    "rows, cols",
+    [((1, 3), (None, None)), ((0, 1), (2, 5)), ((11, 12), (15, 16)), ((None, None), (0, 1))],
+)
+def test_render_subrectangle(flat_scene, tmp_path, rows, cols):
+    out = tmp_path / "sub.exr"
+    povray.render(flat_scene, out, 16, 12, start_row=rows[0], end_row=rows[1],
+                  start_col=cols[0], end_col=cols[1])  # fmt: skip
+    img = read_image(out)[:, :, 0]
+    expect = np.zeros((12, 16), bool)
+    expect[slice(*rows), slice(*cols)] = True
+    np.testing.assert_array_equal(img > 0.25, expect)
+
+
+def test_bad_subrectangle(flat_scene, tmp_path):
+    with pytest.raises(UsageError, match="row"):
+        povray.render(flat_scene, tmp_path / "x.exr", 16, 12, start_row=5, end_row=5)
+    with pytest.raises(UsageError, match="col"):
+        povray.render(flat_scene, tmp_path / "x.exr", 16, 12, end_col=17)
+
+
+def test_parse_error_carries_povray_message(tmp_path):
+    bad = tmp_path / "bad.pov"
+    bad.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 }\nlightsource { <1,1,1> rgb 1 }\n")
+    out = tmp_path / "bad.exr"
+    out.write_bytes(b"previous image")
+    with pytest.raises(PovrayError) as info:
+        povray.render(bad, out, 8, 6)
+    msg = str(info.value)
+    assert "bad.pov" in msg
+    assert "Parse Error" in msg and "lightsource" in msg
+    assert "Persistence of Vision" not in msg  # banner removed
+    assert out.read_bytes() == b"previous image"  # never half-written
+    assert _leftovers(tmp_path) == []
+
+
+def test_missing_include_message(tmp_path):
+    bad = tmp_path / "inc.pov"
+    bad.write_text('#version 3.7;\n#include "no_such_file.inc"\n')
+    with pytest.raises(PovrayError, match="no_such_file.inc"):
+        povray.render(bad, tmp_path / "inc.exr", 8, 6)
+
+
+def test_missing_povray(monkeypatch, flat_scene, tmp_path):
+    monkeypatch.setenv(povray.ENV_VAR, str(tmp_path / "nowhere" / "povray"))
+    with pytest.raises(PovrayError) as info:
+        povray.render(flat_scene, tmp_path / "x.exr", 8, 6)
+    assert povray.ENV_VAR in str(info.value)
+    assert info.value.hint and "povray" in info.value.hint
+    with pytest.raises(PovrayError, match=povray.ENV_VAR):
+        povray.povray_version()
+
+
+def test_missing_povray_on_path(monkeypatch, flat_scene, tmp_path):
+    monkeypatch.delenv(povray.ENV_VAR, raising=False)
+    monkeypatch.setenv("PATH", str(tmp_path))
+    with pytest.raises(PovrayError, match="not found"):
+        povray.render(flat_scene, tmp_path / "x.exr", 8, 6)
+
+
+def test_usage_errors(flat_scene, tmp_path):
+    with pytest.raises(UsageError, match="suffix"):
+        povray.render(flat_scene, tmp_path / "x.jpg", 8, 6)
+    with pytest.raises(UsageError, match="does not exist"):
+        povray.render(tmp_path / "nope.pov", tmp_path / "x.exr", 8, 6)
+    with pytest.raises(UsageError, match="folder"):
+        povray.render(flat_scene, tmp_path / "no_dir" / "x.exr", 8, 6)
+
+
+def test_library_paths_resolve_scene_includes(tmp_path):
+    """POV-Ray resolves #include relative to its cwd/library paths only."""
+    scene_dir = tmp_path / "scene"
+    work = tmp_path / "work"
+    scene_dir.mkdir()
+    work.mkdir()
+    (scene_dir / "colour.inc").write_text("#declare Col = rgb <0.25, 0.5, 0.75>;\n")
+    (scene_dir / "s.pov").write_text(
+        FLAT.replace("pigment { rgb 0.5 }", "pigment { Col }").replace(
+            "camera", '#include "colour.inc"\ncamera'
+        )
+    )
+    wrapper = work / "w.pov"
+    wrapper.write_text(f'#version 3.7;\n#include "{scene_dir / "s.pov"}"\n')
+    with pytest.raises(PovrayError, match="colour.inc"):
+        povray.render(wrapper, work / "w.exr", 8, 6)
+    povray.render(wrapper, work / "w.exr", 8, 6, library_paths=[scene_dir])
+    np.testing.assert_allclose(read_image(work / "w.exr")[3, 4], [0.25, 0.5, 0.75], atol=1e-3)
+
+
+def test_image_is_taken_when_written_not_at_process_exit(tmp_path):
+    """POV-Ray idles ~0.3 s after closing its image; output_written sees the
+    closed file while the process still runs, and the image is complete."""
+    import subprocess
+    scene = tmp_path / "s.pov"
+    scene.write_text(FLAT + "sphere { 0, 1 pigment { checker rgb 1 rgb 0 scale 0.2 } "
+                            "finish { ambient 1 diffuse 0 } }\n")
+    out = tmp_path / "a.exr"
+    proc = subprocess.Popen([povray.find_povray(), "-D", "-V", "-GR", "-GS", f"+I{scene}",
+                             f"+O{out}", "+FE", "+W64", "+H48", "-A", "+WT1"],
+                            cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    seen_while_running = False
+    while proc.poll() is None:
+        if povray.output_written(proc.pid, out):
+            seen_while_running = proc.poll() is None
+            shutil.copy(out, tmp_path / "early.exr")   # what a caller takes at once
+            break
+        time.sleep(0.002)
+    proc.wait()
+    assert seen_while_running
+    early = read_image(tmp_path / "early.exr")
+    full = povray.render(scene, tmp_path / "b.exr", 64, 48)
+    np.testing.assert_array_equal(early, read_image(full))
+    assert not povray.output_written(proc.pid, tmp_path / "missing.exr")
+
+
+def test_a_wrapper_script_is_never_judged_done_before_it_exits(tmp_path):
+    """A POVLENS_POVRAY wrapper may work on after its POV-Ray child exits (the
+    window between the child's exit and its own): never picked up early then."""
+    import subprocess
+    scene = tmp_path / "s.pov"
+    scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
+    out = tmp_path / "a.exr"
+    wrapper = tmp_path / "wrap"
+    wrapper.write_text(f'#!/bin/sh\n"{povray.find_povray()}" "$@"\n'
+                       # shell builtins only: no child process while it works on
+                       'i=0; while [ $i -lt 100000 ]; do i=$((i+1)); done\n'
+                       f'echo done > "{tmp_path}/marker"\n')
+    wrapper.chmod(0o755)
+    proc = subprocess.Popen([str(wrapper), "-D", "-V", "-GR", "-GS", f"+I{scene}", f"+O{out}",
+                             "+FE", "+W16", "+H12", "-A"], cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    judged_early = False
+    while proc.poll() is None:
+        if out.exists() and povray.output_written(proc.pid, out):
+            judged_early = proc.poll() is None
+            break
+        time.sleep(0.005)
+    proc.wait()
+    assert not judged_early
+    assert (tmp_path / "marker").exists()
+
+
+def _povray_stat(pid: int) -> list[str]:
+    """/proc/PID/stat fields after the name, once PID runs POV-Ray (a ``chrt`` or
+    ``nice`` prefix execs it in the same process)."""
+    deadline = time.monotonic() + 5
+    while "povray" not in os.path.basename(os.readlink(f"/proc/{pid}/exe")):
+        assert time.monotonic() < deadline, "POV-Ray did not start"
+        time.sleep(0.001)
+    return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+
+
+@pytest.fixture(params=["prefix", "preexec_fn"])
+def priority_by(request, monkeypatch):
+    """Both ways start_render lowers priorities: a chrt / nice prefix, and the
+    preexec_fn fallback where those programs are missing."""
+    if request.param == "preexec_fn":
+        monkeypatch.setattr(povray, "_priority_tools", lambda: (None, None))
+    else:
+        assert all(povray._priority_tools()), "chrt and nice are on every Debian"
+    return request.param
+
+
+def test_start_render_can_lower_the_priority(tmp_path, priority_by):
+    scene = tmp_path / "s.pov"
+    scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
+    job = povray.start_render(scene, tmp_path / "a.exr", 16, 12, nice=7)
+    try:
+        fields = _povray_stat(job.proc.pid)
+        own = int(open("/proc/self/stat").read().rsplit(")", 1)[1].split()[16])
+        assert int(fields[16]) == min(19, own + 7)     # field 19 of stat: nice
+    finally:
+        job.wait()
+    assert (tmp_path / "a.exr").exists()
+
+
+def test_start_render_can_run_at_idle_priority(tmp_path, priority_by):
+    """idle=True: Linux's SCHED_IDLE policy (5), field 41 of /proc/PID/stat."""
+    scene = tmp_path / "s.pov"
+    scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
+    job = povray.start_render(scene, tmp_path / "a.exr", 16, 12, idle=True)
+    try:
+        fields = _povray_stat(job.proc.pid)
+        assert int(fields[38]) == os.SCHED_IDLE
+    finally:
+        job.wait()
+    assert (tmp_path / "a.exr").exists()
+
+
+def test_version_is_remembered_across_runs_and_asked_again_after_an_upgrade(tmp_path,
+                                                                           monkeypatch):
+    """The version cache: a second process (lru_cache cleared) does not run POV-Ray;
+    a binary that changes (another mtime: an upgrade) is asked again; a script is
+    never cached (its POV-Ray may change behind it)."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    real = shutil.which("povray")
+    binary = tmp_path / "povray"
+    shutil.copy(real, binary)                          # an ELF binary we can touch
+    calls = []
+    ask = povray._ask_version
+    monkeypatch.setattr(povray, "_ask_version", lambda exe: calls.append(exe) or ask(exe))
+    povray._version_of.cache_clear()
+    v = povray.povray_version(str(binary))
+    povray._version_of.cache_clear()
+    assert povray.povray_version(str(binary)) == v and len(calls) == 1
+    os.utime(binary, ns=(0, 10**18))                   # "upgraded"
+    povray._version_of.cache_clear()
+    assert povray.povray_version(str(binary)) == v and len(calls) == 2
+    script = tmp_path / "wrap"
+    script.write_text(f'#!/bin/sh\nexec "{real}" "$@"\n')
+    script.chmod(0o755)
+    for _ in range(2):
+        povray._version_of.cache_clear()
+        assert povray.povray_version(str(script)) == v
+    assert len(calls) == 4
+    povray._version_of.cache_clear()
+
+
+def test_a_chrt_that_cannot_set_the_policy_is_not_used(tmp_path, monkeypatch):
+    """A sandbox may forbid SCHED_IDLE: chrt then exits 1 instead of running POV-Ray.
+    The first use tries 'chrt --idle 0 true'; on failure the preexec_fn fallback
+    starts POV-Ray (here with SCHED_IDLE, which this machine permits)."""
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "chrt").write_text("#!/bin/sh\necho 'chrt: failed to set pid 0 policy' >&2\nexit 1\n")
+    (fake / "chrt").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake}:{os.environ['PATH']}")
+    povray._priority_tools.cache_clear()
+    try:
+        assert povray._priority_tools()[0] is None
+        scene = tmp_path / "s.pov"
+        scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
+        job = povray.start_render(scene, tmp_path / "a.exr", 16, 12, idle=True)
+        try:
+            assert int(_povray_stat(job.proc.pid)[38]) == os.SCHED_IDLE
+        finally:
+            job.wait()
+        assert (tmp_path / "a.exr").exists()
+    finally:
+        povray._priority_tools.cache_clear()
