@@ -35,7 +35,7 @@ def register(sub) -> None:
 def _write_colour(path: Path, rgb: np.ndarray) -> None:
     import OpenImageIO as oiio
 
-    from povlens.pov.process import atomic_output
+    from povlens.util.files import atomic_output
     h, w, _ = rgb.shape
     spec = oiio.ImageSpec(w, h, 3, oiio.FLOAT)
     spec.channelnames = ("R", "G", "B")

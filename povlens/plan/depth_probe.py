@@ -59,7 +59,8 @@ import numpy as np
 
 from povlens.plan.convert import read_plan
 from povlens.errors import PovlensError
-from povlens.pov.mesh import pinhole_wrapper, write_text
+from povlens.pov.mesh import pinhole_wrapper
+from povlens.util.files import write_text
 from povlens.pov.process import start_render
 
 __all__ = ["probe_depth", "start_probe", "DepthProbe", "fog_wrapper", "ray_directions",

@@ -50,7 +50,8 @@ from typing import Sequence
 import numpy as np
 
 from povlens.errors import PovlensError, UsageError
-from povlens.pov.process import atomic_output, needs_row_workaround, povray_version
+from povlens.pov.process import needs_row_workaround, povray_version
+from povlens.util.files import write_text
 
 __all__ = [
     "SINK_RADIUS",
@@ -62,7 +63,6 @@ __all__ = [
     "mesh_wrapper",
     "focal_blur_wrapper",
     "pinhole_wrapper",
-    "write_text",
 ]
 
 #: Folder holding ``mesh_wrapper.pov.tmpl`` and ``focal_blur_wrapper.pov.tmpl``.
@@ -135,12 +135,6 @@ def _check_name(name: str) -> None:
         )
 
 
-def write_text(path: str | os.PathLike, text: str) -> Path:
-    """Write ``text`` to ``path`` atomically (temporary name + rename)."""
-    path = Path(path)
-    with atomic_output(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-    return path
 
 
 # ---------------------------------------------------------------------------

@@ -41,9 +41,10 @@ import tempfile
 import time
 import uuid
 from pathlib import Path
-from typing import Iterable, Iterator, Sequence
+from typing import Iterable, Sequence
 
 from povlens.errors import PovrayError, UsageError
+from povlens.util.files import atomic_output
 
 __all__ = [
     "ENV_VAR",
@@ -54,8 +55,6 @@ __all__ = [
     "start_render",
     "RenderJob",
     "output_written",
-    "temporary_path",
-    "atomic_output",
 ]
 
 #: Environment variable that overrides which POV-Ray executable is used.
@@ -72,41 +71,6 @@ _NOISE = re.compile(
 
 
 # ---------------------------------------------------------------------------
-# atomic file output (shared by images.py and mesh_camera.py)
-
-
-def temporary_path(final: str | os.PathLike) -> Path:
-    """A fresh temporary file name in the folder of ``final``, same suffix.
-
-    The suffix is kept so that tools that pick a format from the file name
-    (POV-Ray, OpenImageIO) write the right format.  The file is not created
-    (so it gets ordinary permissions when it is written).
-    """
-    final = Path(final)
-    return final.parent / f".{final.stem}.{os.getpid()}-{uuid.uuid4().hex[:12]}.tmp{final.suffix}"
-
-
-@contextlib.contextmanager
-def atomic_output(final: str | os.PathLike) -> Iterator[Path]:
-    """Context manager: yields a temporary path; renames it to ``final`` on success.
-
-    On an exception the temporary file is removed and ``final`` is left as it
-    was, so a half-written file never appears under the final name.
-    """
-    final = Path(final)
-    if not final.parent.is_dir():
-        raise UsageError(
-            f"cannot write {final}: folder {final.parent} does not exist",
-            "create the folder or choose another output path",
-        )
-    tmp = temporary_path(final)
-    try:
-        yield tmp
-        os.replace(tmp, final)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
 
 
 # ---------------------------------------------------------------------------

@@ -45,7 +45,8 @@ from povlens.lens.film import Film
 from povlens.render.composite import composite
 from povlens.util.images import read_image, write_exr, write_png_srgb
 from povlens.pupil.rays import ScenePlacement, sample_points, sample_rays
-from povlens.pov.mesh import write_ray_mesh, write_text
+from povlens.pov.mesh import write_ray_mesh
+from povlens.util.files import write_text
 from povlens.lens.paraxial import stopped_down
 from povlens.pov.process import FIRST_OUTPUT_S, find_povray, output_written, render as povray_render
 from povlens.lens.prescription import read_lens

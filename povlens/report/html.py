@@ -38,7 +38,7 @@ import numpy as np
 from povlens.plan.convert import read_plan
 from povlens.errors import PovlensError
 from povlens.lens.frames import vertex_z_mm
-from povlens.pov.mesh import write_text
+from povlens.util.files import write_text
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import LensPrescription, sag_mm
 from povlens.lens.tracer import trace_from_film

@@ -19,7 +19,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from povlens.errors import PovlensError
-from povlens.pov.process import atomic_output
+from povlens.util.files import atomic_output
 
 __all__ = ["ImageError", "read_image", "write_exr", "write_png_srgb"]
 

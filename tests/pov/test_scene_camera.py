@@ -18,7 +18,8 @@ import pytest
 from povlens.pov import process as povray
 from povlens.errors import PovlensError
 from povlens.util.images import read_image
-from povlens.pov.mesh import pinhole_wrapper, write_text
+from povlens.pov.mesh import pinhole_wrapper
+from povlens.util.files import write_text
 from povlens.pov.scene_camera import SceneCameraError, parse_scene_camera
 
 REPO = Path(__file__).resolve().parents[2]

@@ -1,0 +1,152 @@
+"""The package's shape: pipeline layers, imports only downward, no cycles, small modules
+and functions, no private names across modules, a public API at the root.
+
+Read from the source with :mod:`ast` (function-level imports count), so a violation is
+caught wherever it hides.
+"""
+from __future__ import annotations
+
+import ast
+import pathlib
+
+import pytest
+
+PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "povlens"
+
+# The pipeline, lowest first.  A module may import its own layer and the ones below.
+# The package root (its public API, ``povlens/__init__.py``) sits just below ``cli``: the
+# command line is a thin layer over it.
+LAYERS = ["errors", "util", "lens", "pupil", "thinlens", "pov", "plan", "render", "report",
+          "bench", "api", "cli"]
+MAX_MODULE_LINES = 700
+MAX_FUNCTION_LINES = 120
+
+
+def _modules() -> dict[str, pathlib.Path]:
+    out = {}
+    for path in PACKAGE.rglob("*.py"):
+        rel = path.relative_to(PACKAGE.parent).with_suffix("")
+        parts = list(rel.parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _layer(module: str) -> int:
+    parts = module.split(".")
+    if len(parts) < 2:
+        return LAYERS.index("api")
+    name = parts[1]
+    if name == "__main__":
+        return LAYERS.index("cli")
+    return LAYERS.index(name)
+
+
+def _resolve(module: str, node: ast.ImportFrom) -> str:
+    if node.level == 0:
+        return node.module or ""
+    is_pkg = MODULES[module].name == "__init__.py"
+    base = module.split(".")
+    base = base if is_pkg else base[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _imports(module: str) -> list[tuple[str, str | None, int]]:
+    """(imported module, imported name or None, line) for every import in ``module``."""
+    tree = ast.parse(MODULES[module].read_text())
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("povlens"):
+                    found.append((alias.name, None, node.lineno))
+        elif isinstance(node, ast.ImportFrom):
+            target = _resolve(module, node)
+            if not target.startswith("povlens"):
+                continue
+            for alias in node.names:
+                sub = f"{target}.{alias.name}"
+                if sub in MODULES:
+                    found.append((sub, None, node.lineno))
+                else:
+                    found.append((target, alias.name, node.lineno))
+    return found
+
+
+def test_every_module_belongs_to_a_layer():
+    for module in MODULES:
+        parts = module.split(".")
+        if len(parts) > 1:
+            assert parts[1] in LAYERS + ["__main__"], f"{module} is in no pipeline layer"
+
+
+def test_imports_only_go_downward():
+    bad = []
+    for module in MODULES:
+        own = _layer(module)
+        for target, _, line in _imports(module):
+            other = _layer(target)
+            if other is not None and other > own:
+                bad.append(f"{module}:{line} imports {target} (layer {LAYERS[other]} "
+                           f"above {LAYERS[own]})")
+    assert not bad, "\n".join(bad)
+
+
+def test_no_import_cycles():
+    graph = {m: {t for t, _, _ in _imports(m) if t in MODULES and t != m} for m in MODULES}
+    # a package's __init__ is imported with its modules; only edges between modules count
+    graph = {m: {t for t in ts if MODULES[t].name != "__init__.py"} for m, ts in graph.items()}
+    state: dict[str, int] = {}
+    cycles = []
+
+    def visit(node, stack):
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                cycles.append(" -> ".join(stack[stack.index(nxt):] + [nxt]))
+            elif nxt not in state:
+                visit(nxt, stack)
+        stack.pop()
+        state[node] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [])
+    assert not cycles, "\n".join(cycles)
+
+
+def test_no_private_name_is_imported_from_another_module():
+    bad = [f"{m}:{line} imports {name} from {target}"
+           for m in MODULES for target, name, line in _imports(m)
+           if name is not None and name.startswith("_") and not name.startswith("__")]
+    assert not bad, "\n".join(bad)
+
+
+def test_modules_and_functions_are_small():
+    bad = []
+    for module, path in MODULES.items():
+        text = path.read_text()
+        n = len(text.splitlines())
+        if n > MAX_MODULE_LINES:
+            bad.append(f"{module}: {n} lines (> {MAX_MODULE_LINES})")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                length = node.end_lineno - node.lineno + 1
+                if length > MAX_FUNCTION_LINES:
+                    bad.append(f"{module}.{node.name}: {length} lines (> {MAX_FUNCTION_LINES})")
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("name", ["read_lens", "focus", "build_pupil_table", "convert",
+                                  "render", "composite", "compare"])
+def test_public_api_at_the_package_root(name):
+    import povlens
+    assert name in povlens.__all__
+    assert callable(getattr(povlens, name))
+    assert getattr(povlens, name).__doc__, f"povlens.{name} has no docstring"
