@@ -33,7 +33,7 @@ import numpy as np  # noqa: E402
 from povlens.lens.focus import thick_lens_film_distance_mm  # noqa: E402
 from povlens.lens.paraxial import paraxial_data  # noqa: E402
 from povlens.lens.prescription import read_lens  # noqa: E402
-from povlens.pupil.table import build_pupil_table  # noqa: E402
+from povlens.pupil.build import build_pupil_table  # noqa: E402
 from povlens.pupil.baselines import (PBRT_INTERVALS, PBRT_RAYS_PER_INTERVAL,  # noqa: E402
                                      NaiveRearElement, PbrtBoxes)
 

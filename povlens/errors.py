@@ -2,15 +2,32 @@
 
 Every error a user can cause derives from :class:`PovlensError`.  The command
 line prints its message (never a traceback) and exits with ``exit_code``.
+
+Messages speak the Python API.  Hints, and the messages of
+:class:`ParameterError`, write a parameter as the API spells it: ``name=value``
+where they give its value (``f_number=1.2: ...``) and ``'name'`` where they name
+the parameter alone (``give 'location' and 'look_at'``).  The command line
+(:mod:`povlens.cli.flags`) rewrites both forms to the option that sets the
+parameter (``--f-number 1.2``, ``--location``).  Other messages may quote the
+user's own text (a scene identifier ``'width'``) and are printed as they are.
 """
 
 from __future__ import annotations
 
-__all__ = ["PovlensError", "LensFileError", "OpticsError", "UsageError", "PovrayError"]
+__all__ = ["PovlensError", "LensFileError", "OpticsError", "UsageError", "ParameterError",
+           "PovrayError", "PovlensWarning", "LensClipWarning", "NominalFNumberWarning"]
 
 
 class PovlensError(Exception):
-    """An error with a message meant for the user; ``exit_code`` for the CLI."""
+    """An error with a message meant for the user; ``exit_code`` for the CLI.
+
+    Parameters
+    ----------
+    message : str
+        What went wrong, naming the file, parameter or value concerned.
+    hint : str, optional
+        What to do about it (printed on a second line, after ``hint:``).
+    """
 
     exit_code = 2
 
@@ -36,10 +53,51 @@ class OpticsError(PovlensError):
 
 
 class UsageError(PovlensError):
-    """A bad command-line option or argument value."""
+    """A bad option, argument or parameter value."""
+
+
+class ParameterError(UsageError):
+    """A bad value of one API parameter.
+
+    Parameters
+    ----------
+    parameter : str
+        The parameter as the API spells it (``"f_number"``, ``"tolerance_px"``,
+        ``"focus"``); the command line maps it to its option.
+    value : object
+        The value given (``None`` when the parameter is missing).
+    message : str
+        What is wrong, naming the parameter as ``parameter=value`` or
+        ``'parameter'`` (see the module docstring), e.g.
+        ``"f_number=1.2: dgauss.50mm opens only to F/2.03"``.
+    hint : str, optional
+        What to do about it, naming parameters the same way.
+    """
+
+    def __init__(self, parameter: str, value, message: str, hint: str | None = None):
+        self.parameter = parameter
+        self.value = value
+        super().__init__(message, hint)
 
 
 class PovrayError(PovlensError):
     """POV-Ray is missing or failed; the message carries POV-Ray's own output."""
 
     exit_code = 3
+
+
+class PovlensWarning(UserWarning):
+    """A notice for the user: povlens went on, but read or used something other than
+    what was given.  Issued with :func:`warnings.warn`; the command line prints each
+    distinct one once, on one line."""
+
+
+class LensClipWarning(PovlensWarning):
+    """A lens row's aperture was larger than its surface can physically be (a housing
+    diameter, not a clear aperture) and was clipped; names the file, row, line and
+    the clipped diameter."""
+
+
+class NominalFNumberWarning(PovlensWarning):
+    """An f-number slightly faster than the lens's widest (a nominal, rounded one) was
+    taken as the lens wide open."""

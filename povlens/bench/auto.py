@@ -26,9 +26,8 @@ reachable (``inf``) if its best point is worse (focal_blur's model-error floor,
 pinhole's missing blur).  The best fixed method is the fastest of these, and the
 ratio ``auto / best`` is the column the issue asks for (<= 1.10 to pass).  The
 same ratio of the median runs is printed beside it (column ``med``): a minimum
-of five runs hangs on one lucky run (paper.pov with cooke.triplet.50mm, the fixed
-8-sample mesh: fastest of five 0.91 s in one bench run, 0.85 s in the next, with
-the same code for it), a median does not.
+of five runs hangs on one lucky run, a median does not
+(docs/decisions/planning.md, "Bench medians").
 
 **Error budget in image terms.**  ``--tolerance`` is in pixels.  Its image
 equivalent for a scene is the RMSE that moving the reference by the tolerance
@@ -43,6 +42,7 @@ import csv
 import dataclasses
 import math
 import os
+import platform
 import shutil
 import statistics
 import tempfile
@@ -51,11 +51,12 @@ from pathlib import Path
 
 import numpy as np
 
-from povlens.plan.auto import shift_rmse
 from povlens.bench.time_error import ROOT, rmse
 from povlens.plan.convert import ConvertOptions
-from povlens.util.images import read_image
+from povlens.plan.decision import shift_rmse
 from povlens.render.samples import convert_and_render
+from povlens.util.files import atomic_output, write_text
+from povlens.util.images import read_image
 
 __all__ = ["AutoBenchSettings", "AutoRow", "run_auto_bench", "shift_rmse", "corrected_rmse",
            "time_at_error", "SCENE_FOCUS"]
@@ -134,10 +135,7 @@ def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]
     """Run the benchmark; returns the rows and the printed summary (also written to
     OUT/NAME.csv and OUT/NAME.txt)."""
     jobs = s.jobs or os.cpu_count() or 1
-    # every module any method needs is imported before the clock starts
-    import importlib
-    for mod in ("plan.auto", "plan.depth_probe", "pupil.table", "thinlens.model", "pupil.rays"):
-        importlib.import_module(f"povlens.{mod}")
+    # every module any method needs is imported with this one, before the clock starts
     tmp = Path(s.keep) if s.keep else Path(tempfile.mkdtemp(prefix="povlens-bench-auto-"))
     tmp.mkdir(parents=True, exist_ok=True)
     rows: list[AutoRow] = []
@@ -196,12 +194,12 @@ def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]
                     t, img, plan = best[(method, k)]
                     med = statistics.median(times[(method, k)])
                     if method == "auto":
-                        chosen = plan["inputs"]["method"]
-                        n = int(plan["inputs"]["samples"])
+                        chosen = plan.inputs.method
+                        n = int(plan.inputs.samples)
                         rows.append(AutoRow(scene, lens, "auto", n, t, err(img), chosen, med))
                         details[(scene, lens)] = {"budget": budget,
-                                                  "decision": plan.get("decision", {}),
-                                                  "adaptive": plan.get("adaptive")}
+                                                  "decision": plan.decision,
+                                                  "adaptive": plan.adaptive}
                         log(f"{tag}: auto -> {chosen} N={n} {t:.2f} s rmse "
                             f"{rows[-1].rmse:.5f} (budget {budget:.5f})")
                     else:
@@ -217,22 +215,18 @@ def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]
     out = Path(s.out)
     out.mkdir(parents=True, exist_ok=True)
     _write_csv(out / f"{s.name}.csv", rows)
-    part = out / f".{s.name}.txt.part"
-    part.write_text(summary + "\n")
-    os.replace(part, out / f"{s.name}.txt")
+    write_text(out / f"{s.name}.txt", summary + "\n")
     return rows, summary
 
 
 def _write_csv(path: Path, rows: list[AutoRow]) -> None:
-    part = path.with_name("." + path.name + ".part")
-    with open(part, "w", newline="") as f:
+    with atomic_output(path) as part, open(part, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["scene", "lens", "method", "samples", "seconds", "rmse", "chosen",
                     "median_seconds"])
         for r in rows:
             w.writerow([r.scene, r.lens, r.method, r.samples, f"{r.seconds:.4f}",
                         f"{r.rmse:.6g}", r.chosen, f"{r.median_s:.4f}"])
-    os.replace(part, path)
 
 
 def best_fixed(rows: list[AutoRow], target: float, median: bool = False) -> dict[str, float]:
@@ -247,7 +241,8 @@ def best_fixed(rows: list[AutoRow], target: float, median: bool = False) -> dict
 
 
 def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s: float) -> str:
-    import platform
+    """The printed summary: per scene and lens auto's time and error against the best
+    fixed method at equal error, why auto chose what it chose, and every run."""
     lines = [f"povlens bench --auto: {s.width}x{s.height}, tolerance {s.tolerance_px} px, "
              f"reference {s.reference_samples} samples (seed {REFERENCE_SEED}), fixed sweeps "
              f"focal-blur N = {','.join(map(str, s.focal_blur_samples))}, mesh N = "
@@ -300,9 +295,9 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
     lines.append("why auto chose what it chose:")
     for (scene, lens), info in details.items():
         d = info["decision"]
-        reasons = d.get("reasons", [])
+        reasons = d.reasons if d is not None else []
         lines.append(f"  {scene} / {lens}: " + (reasons[-1] if reasons else "(no decision)"))
-        num = d.get("numbers", {})
+        num = d.numbers if d is not None else {}
         if num:
             lines.append("      depth {:.3g} m..{} ; max blur {:.3g} px; distortion {:.3g} px; "
                          "blur size error {:.3g} px; shape error {:.3g} px; relative "
@@ -322,8 +317,8 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
                                  num["image_vignetting_rmse"], num["image_shift_rmse"]))
         if info.get("adaptive"):
             a = info["adaptive"]
-            lines.append(f"      adaptive: {a.get('pixel_samples')} pixel-samples instead of "
-                         f"{a.get('uniform_pixel_samples')}")
+            lines.append(f"      adaptive: {a.pixel_samples} pixel-samples instead of "
+                         f"{a.uniform_pixel_samples}")
     lines.append("")
     lines.append("all runs:")
     lines.append(f"{'scene':<7}{'lens':<20}{'method':<12}{'N':>5}{'seconds':>9}{'rmse':>10}")

@@ -8,17 +8,17 @@ Then, for each sample count N, four methods render the same frame and are timed
 and channels):
 
 (a) ``naive-random``   -- the 2012 paper's method: rays toward points spread
-    uniformly over the whole rear element (:class:`povlens.pupil_baselines.NaiveRearElement`),
+    uniformly over the whole rear element (:class:`povlens.pupil.baselines.NaiveRearElement`),
     independent uniform random points (numpy) for film jitter and lens;
 (b) ``pbrt-random``    -- pbrt-style 64-box exit-pupil bounds
-    (:class:`povlens.pupil_baselines.PbrtBoxes`), independent uniform random points;
+    (:class:`povlens.pupil.baselines.PbrtBoxes`), independent uniform random points;
 (c) ``povlens-sobol``  -- povlens's default pipeline: exit-pupil table and
     scrambled Sobol points (exactly what ``povlens render`` does);
 (d) ``focal-blur``     -- POV-Ray's ``focal_blur`` with the equivalent thin lens
     and ``blur_samples N, N`` (``povlens render-view --view focal-blur``).
 
-(a)-(c) use the same mesh code as ``povlens render`` (:func:`povlens.render.render_samples`
-with a sampler and a point override, then :func:`povlens.render.composite_outdir`),
+(a)-(c) use the same mesh code as ``povlens render`` (:func:`povlens.render.samples.render_samples`
+with a sampler and a point override, then :func:`povlens.render.samples.composite_outdir`),
 one batch of samples per job, the jobs in parallel.  Timings cover rays, meshes, POV-Ray and compositing; the
 one-off per-lens precomputation (table, pbrt boxes) is reported separately, and
 conversion (``plan.json``) is excluded for every method.  (d) is timed over its
@@ -39,7 +39,7 @@ Settings
 full (default): 80x60 pixels, lenses dgauss.50mm, wide.22mm, telephoto.250mm,
     N = 4, 8, 16, 32, 64, reference 256 samples, pbrt boxes with 2^16 rays per
     interval (pbrt uses 2^20; only the build time differs), tracer 200,000 /
-    5,000 rays.  About 6 minutes on 2 idle cores (356 s measured).
+    5,000 rays.  About 6 minutes on 2 idle cores.
 quick (``--quick``): 48x36 pixels, dgauss.50mm, N = 4, 8, 16, reference 64
     samples, 2^14 pbrt rays per interval, tracer 100,000 / 2,000 rays.  Under a
     minute on 2 idle cores (up to 2 minutes when they are shared).
@@ -67,10 +67,13 @@ from pathlib import Path
 
 import numpy as np
 
-from povlens.plan.convert import ConvertOptions, convert, read_plan
+from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.schema import read_plan
+from povlens.pupil.baselines import NaiveRearElement, PbrtBoxes
+from povlens.render.samples import (composite_outdir, exposure_for, lens_for, pupil_table_for,
+                                    render_samples, render_view)
+from povlens.util.files import atomic_output, write_text
 from povlens.util.images import read_image
-from povlens.render.samples import (_exposure, composite_outdir, film_for, lens_for, pupil_table_for,
-                     render_samples, render_view)
 
 __all__ = ["BenchSettings", "Row", "METHODS", "full_settings", "quick_settings", "run_bench",
            "render_mesh", "random_points", "time_to_error", "ROOT"]
@@ -137,7 +140,7 @@ class Row:
 def random_points(height: int, width: int, seed: int):
     """``points(k) -> (H, W, 4)`` independent uniform random points (numpy), per sample k.
 
-    Drop-in for :func:`povlens.lens_camera.sample_points` without stratification:
+    Drop-in for :func:`povlens.pupil.rays.sample_points` without stratification:
     the point set of plain Monte Carlo.  Each k has its own generator, so the
     points do not depend on the order (or thread) in which samples are made.
     """
@@ -152,20 +155,20 @@ def render_mesh(outdir, sampler=None, points=None, jobs: int | None = None) -> n
     sampler : lens sampler for the rays (default: the plan's exit-pupil table).
     points : ``points(k) -> (H, W, 4)`` overriding the plan's Sobol points.
     Batches run ``jobs`` at a time (threads, each driving several POV-Ray
-    processes, as :func:`povlens.render.render_samples` does for
-    :func:`povlens.render.render_batch`).  Samples already rendered are redone.
+    processes, as :func:`povlens.render.samples.render_samples` does for
+    :func:`povlens.render.samples.render_batch`).  Samples already rendered are redone.
     """
     outdir = Path(outdir)
     plan = read_plan(outdir)
     lens = lens_for(plan)
     table = pupil_table_for(outdir, plan, lens)
-    _exposure(outdir, plan, lens, table)
+    exposure_for(outdir, plan, lens, table)
     sampler = table if sampler is None else sampler
 
     def run(b: int) -> None:
-        render_samples(plan, lens, sampler, outdir, b, plan["batches"][b], points=points)
+        render_samples(plan, lens, sampler, outdir, b, plan.batches[b], points=points)
 
-    n_batches = len(plan["batches"])
+    n_batches = len(plan.batches)
     jobs = max(1, min(jobs or os.cpu_count() or 1, n_batches))
     if jobs == 1:
         for b in range(n_batches):
@@ -343,7 +346,6 @@ def _log(msg: str, quiet: bool) -> None:
 
 def run_bench(s: BenchSettings, quiet: bool = False) -> tuple[list[Row], str]:
     """Run the benchmark; write CSV, plot and summary to ``s.out``; return (rows, summary)."""
-    from povlens.pupil.baselines import NaiveRearElement, PbrtBoxes
     jobs = s.resolved_jobs()
     samples = sorted(set(int(n) for n in s.samples))
     out = Path(s.out)
@@ -379,8 +381,8 @@ def run_bench(s: BenchSettings, quiet: bool = False) -> tuple[list[Row], str]:
             info["reference_samples"] = s.reference_samples
             info["reference_mean"] = float(reference.mean())
             reference_nv = composite_outdir(ref_dir, vignetting=False, write=False)
-            fd = plan["focus"]["film_distance_mm"]
-            hd = film_for(plan).half_diagonal_mm
+            fd = plan.focus.film_distance_mm
+            hd = plan.film.half_diagonal_mm
             samplers = {
                 "naive-random": NaiveRearElement.build(lens, fd, hd),
                 "pbrt-random": PbrtBoxes.build(lens, fd, hd, rays_per_interval=s.pbrt_rays),
@@ -427,12 +429,12 @@ def run_bench(s: BenchSettings, quiet: bool = False) -> tuple[list[Row], str]:
     if tracer:
         summary += "\n\n" + tracer
     csv_path = out / f"{s.name}.csv"
-    with open(csv_path, "w", newline="") as f:
+    with atomic_output(csv_path) as part, open(part, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["method", "lens", "samples", "seconds", "rmse"])
         for r in rows:
             w.writerow([r.method, r.lens, r.samples, f"{r.seconds:.4f}", f"{r.rmse:.6g}"])
     plot(rows, out / f"{s.name}.png",
          f"{Path(s.scene).name}, {s.width}x{s.height}, reference {s.reference_samples} samples")
-    (out / f"{s.name}.txt").write_text(summary + "\n")
+    write_text(out / f"{s.name}.txt", summary + "\n")
     return rows, summary

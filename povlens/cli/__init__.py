@@ -2,20 +2,34 @@
 
 Each subcommand lives in its own module here and exposes ``register(subparsers)``,
 which adds its parser and sets ``func`` (a function taking the parsed args and
-returning an exit code).  Exit codes: 0 success, 1 a check failed (``check``),
-2 bad input or usage, 3 POV-Ray failed, 130 interrupted.
+returning an exit code).  Exit codes: 0 success, 1 a check failed (``check``) or an
+unexpected error, 2 bad input or usage, 3 POV-Ray failed, 130 interrupted (Ctrl-C),
+143 terminated (SIGTERM, as batch systems and ``kill`` send).
+
+Errors print one message (with the options the user typed, :mod:`povlens.cli.flags`)
+and no traceback; ``POVLENS_DEBUG=1`` shows the traceback of an unexpected error.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
+import threading
+import warnings
 
-from povlens.errors import PovlensError
+from povlens import __version__
+from povlens.cli.flags import error_text, with_flags
+from povlens.errors import PovlensError, PovlensWarning
+
+#: Set to 1 to see the traceback of an unexpected error instead of a one-line message.
+DEBUG_ENV_VAR = "POVLENS_DEBUG"
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ["inspect", "focus", "trace", "check", "plan", "render", "pupil", "compare", "bench", "report"]
+COMMANDS = ["inspect", "focus", "trace", "check", "plan", "render", "pupil", "compare", "bench",
+            "report"]
 
 #: Commands registered by a module of another name (the others: ``<command>_cmd``).
 _MODULE_OF = {"convert": "render", "composite": "render", "render-batch": "render",
@@ -30,7 +44,6 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         prog="povlens",
         description="Real camera lenses for POV-Ray: inspect and focus lens prescriptions, "
                     "trace rays, build exit-pupil tables, and render POV-Ray scenes through them.")
-    from povlens import __version__
     parser.add_argument("--version", action="version", version=f"povlens {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
@@ -43,17 +56,102 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def option_strings(parser: argparse.ArgumentParser, command: str) -> set[str]:
+    """The options (``--f-number``, ``-o`` ...) of subcommand ``command`` of ``parser``."""
+    for action in parser._actions:
+        choices = getattr(action, "choices", None)
+        if isinstance(choices, dict) and command in choices:
+            return {s for a in choices[command]._actions for s in a.option_strings}
+    return set()
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread so that the clean-up of an interrupt (stop
+    POV-Ray, remove temporaries) runs for it too."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
+def terminate_as_interrupt():
+    """While a command runs, SIGTERM raises :class:`Terminated`; returns the restorer.
+    (Only the main thread can take signals; elsewhere nothing changes.)"""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    return lambda: signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run ``povlens`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv else None)
     args = parser.parse_args(argv)
+    restore_warnings = show_warnings_once(option_strings(parser, args.command))
+    restore_sigterm = terminate_as_interrupt()
     try:
         return int(args.func(args) or 0)
     except PovlensError as e:
-        print(f"povlens {args.command}: error: {e}", file=sys.stderr)
+        text = error_text(e, option_strings(parser, args.command))
+        print(f"povlens {args.command}: error: {text}", file=sys.stderr)
         return e.exit_code
+    except Terminated:
+        print(f"povlens {args.command}: terminated", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
         print(f"povlens {args.command}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
         return 0
+    except Exception as e:  # a bug, or the system failing (disk full...): one line, exit 1
+        if os.environ.get(DEBUG_ENV_VAR, "") not in ("", "0"):
+            raise
+        print(f"povlens {args.command}: {unexpected_error_text(e)}", file=sys.stderr)
+        return 1
+    finally:
+        restore_sigterm()
+        restore_warnings()
+
+
+def show_warnings_once(options: set[str]):
+    """Print each distinct :class:`~povlens.errors.PovlensWarning` once, as one line
+    ``povlens: warning: ...`` on stderr (parameters written as ``options``); other
+    warnings print as Python prints them.
+
+    Parameters
+    ----------
+    options : set of str
+        The options of the command (:func:`option_strings`).
+
+    Returns
+    -------
+    callable
+        Restores the warning filters and printer in place before the call.
+    """
+    saved = warnings.catch_warnings()
+    saved.__enter__()
+    python_show, shown = warnings.showwarning, set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, PovlensWarning):
+            return python_show(message, category, filename, lineno, file, line)
+        text = with_flags(str(message), options)
+        if text not in shown:
+            shown.add(text)
+            print(f"povlens: warning: {text}", file=sys.stderr)
+
+    warnings.simplefilter("always", PovlensWarning)  # repeats are dropped by ``show``
+    warnings.showwarning = show
+    return lambda: saved.__exit__(None, None, None)
+
+
+def unexpected_error_text(error: Exception) -> str:
+    """What the command line prints for an exception that is no :class:`PovlensError`:
+    a system error (``OSError``) or a bug, with how to see its traceback."""
+    if isinstance(error, OSError):
+        return (f"error: {error}\n"
+                f"  hint: run again with {DEBUG_ENV_VAR}=1 to see where it happened")
+    return (f"internal error: {type(error).__name__}: {error}\n"
+            f"  hint: this is a bug in povlens; run again with {DEBUG_ENV_VAR}=1 to see the "
+            f"traceback, and report it")

@@ -18,8 +18,6 @@ def _counts(text: str) -> tuple[int, ...]:
     return v
 
 
-
-
 def register(sub) -> None:
     from povlens.bench import time_error as bench
     p = sub.add_parser(
@@ -28,7 +26,7 @@ def register(sub) -> None:
         description=bench.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--auto", action="store_true",
                    help="benchmark --method auto against the fixed methods at equal error, "
-                        "on each bundled scene and lens (see povlens/bench_auto.py; writes "
+                        "on each bundled scene and lens (see povlens/bench/auto.py; writes "
                         "auto.csv / auto.txt); uses --lenses, --reference-samples, --width, "
                         "--height, --jobs, --out, --keep, --quick and --scenes")
     p.add_argument("--scenes", help="--auto: comma-separated bundled scenes (default paper,chart)")

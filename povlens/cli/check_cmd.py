@@ -4,19 +4,21 @@ from __future__ import annotations
 
 import math
 
+from povlens.lens.check import check_lens
 from povlens.lens.focus import thick_lens_film_distance_mm, to_mm
-from povlens.cli.common import add_lens_arguments, distance, load_lens, positive_float, print_json
+from povlens.cli.common import add_lens_command, distance, load_lens, positive_float, print_json
 
 
 def register(sub) -> None:
-    p = sub.add_parser("check", help="check the fast tracer against the reference tracer",
-                       description="Trace many rays from film points across the frame toward "
-                                   "points across the rear element with both the vectorized and "
-                                   "the one-ray-at-a-time reference tracer, and report the "
-                                   "largest differences.  Exit status 1 when positions differ "
-                                   "by more than 1e-9 mm, directions by more than 1e-12, or the "
-                                   "two disagree on a blocked ray away from an aperture edge.")
-    add_lens_arguments(p)
+    p = add_lens_command(
+        sub, "check", run,
+        help="check the fast tracer against the reference tracer",
+        description="Trace many rays from film points across the frame toward "
+                    "points across the rear element with both the vectorized and "
+                    "the one-ray-at-a-time reference tracer, and report the "
+                    "largest differences.  Exit status 1 when positions differ "
+                    "by more than 1e-9 mm, directions by more than 1e-12, or the "
+                    "two disagree on a blocked ray away from an aperture edge.")
     p.add_argument("--film-distance", type=positive_float, metavar="MM",
                    help="rear vertex to film, mm (default: focused by --focus)")
     p.add_argument("--focus", type=distance, default=math.inf, metavar="D",
@@ -25,11 +27,9 @@ def register(sub) -> None:
     p.add_argument("--film-diagonal", type=positive_float, default=35.0, metavar="MM",
                    help="film diagonal in mm (default 35)")
     p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from povlens.lens.check import check_lens
     lens = load_lens(args)
     film = args.film_distance
     if film is None:

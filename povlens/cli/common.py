@@ -6,10 +6,37 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Callable
+
+import numpy as np
 
 from povlens.errors import UsageError
 from povlens.lens.paraxial import stopped_down
 from povlens.lens.prescription import LensPrescription, read_lens
+
+
+def add_lens_command(sub, name: str, run: Callable, *, help: str,
+                     description: str) -> argparse.ArgumentParser:
+    """Add subcommand ``name`` that reads LENS with its stop options and runs ``run``.
+
+    Parameters
+    ----------
+    sub : argparse subparsers action
+        The subcommands of the ``povlens`` parser.
+    name, help, description : str
+        The subcommand, as ``add_parser`` takes them.
+    run : callable
+        Function of the parsed arguments returning the exit code.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The subcommand's parser, to add its own options to.
+    """
+    p = sub.add_parser(name, help=help, description=description)
+    add_lens_arguments(p)
+    p.set_defaults(func=run)
+    return p
 
 
 def add_lens_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,12 +52,14 @@ def add_lens_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def load_lens(args) -> LensPrescription:
+    """The lens of ``args.lens``, stopped down by ``--f-number`` / ``--stop-diameter``."""
     lens = read_lens(args.lens)
     return stopped_down(lens, stop_diameter_mm=getattr(args, "stop_diameter", None),
                         f_number=getattr(args, "f_number", None))
 
 
 def positive_float(text: str) -> float:
+    """A positive finite number (argparse type)."""
     try:
         v = float(text)
     except ValueError:
@@ -59,22 +88,15 @@ def distance(text: str) -> float:
 
 
 def print_json(obj) -> None:
+    """Print ``obj`` as indented JSON; numpy scalars and arrays become numbers and lists."""
     json.dump(obj, sys.stdout, indent=2, allow_nan=False, default=_default)
     sys.stdout.write("\n")
 
 
 def _default(o):
-    try:
-        import numpy as np
-        if isinstance(o, np.generic):
-            return o.item()
-        if isinstance(o, np.ndarray):
-            return o.tolist()
-    except ImportError:  # pragma: no cover
-        pass
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
-
-def require(cond: bool, message: str, hint: str | None = None) -> None:
-    if not cond:
-        raise UsageError(message, hint)

@@ -6,8 +6,11 @@ import math
 from pathlib import Path
 
 import numpy as np
+import OpenImageIO as oiio
 
-from povlens.report.compare import PSNR_PEAK, CompareError, compare_arrays, difference_magnitude, false_colour
+from povlens.report.compare import (PSNR_PEAK, CompareError, compare_arrays,
+                                    difference_magnitude, false_colour)
+from povlens.util.files import atomic_output
 from povlens.util.images import ImageError, read_image
 from povlens.cli.common import positive_float, print_json
 
@@ -33,9 +36,6 @@ def register(sub) -> None:
 
 
 def _write_colour(path: Path, rgb: np.ndarray) -> None:
-    import OpenImageIO as oiio
-
-    from povlens.util.files import atomic_output
     h, w, _ = rgb.shape
     spec = oiio.ImageSpec(w, h, 3, oiio.FLOAT)
     spec.channelnames = ("R", "G", "B")

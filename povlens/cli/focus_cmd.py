@@ -5,23 +5,23 @@ from __future__ import annotations
 import math
 
 from povlens.lens.focus import UNITS_MM, focus, to_mm
-from povlens.cli.common import add_lens_arguments, distance, load_lens, print_json
+from povlens.cli.common import add_lens_command, distance, load_lens, print_json
 
 
 def register(sub) -> None:
-    p = sub.add_parser("focus", help="film distance that focuses an object distance",
-                       description="Film distance (rear vertex to film, mm) that focuses LENS on "
-                                   "an object DISTANCE from the film plane (as on a lens barrel): "
-                                   "by the thick-lens equation and by an exact real-ray focus "
-                                   "(minimum RMS spot of the on-axis bundle through the stopped "
-                                   "lens).")
-    add_lens_arguments(p)
+    p = add_lens_command(
+        sub, "focus", run,
+        help="film distance that focuses an object distance",
+        description="Film distance (rear vertex to film, mm) that focuses LENS on "
+                    "an object DISTANCE from the film plane (as on a lens barrel): "
+                    "by the thick-lens equation and by an exact real-ray focus "
+                    "(minimum RMS spot of the on-axis bundle through the stopped "
+                    "lens).")
     p.add_argument("--distance", "-d", type=distance, required=True, metavar="D",
                    help="object distance from the film plane ('inf' for infinity)")
     p.add_argument("--units", choices=sorted(UNITS_MM), default="mm",
                    help="units of --distance (default mm)")
     p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:

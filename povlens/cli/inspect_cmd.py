@@ -2,19 +2,18 @@
 
 from __future__ import annotations
 
-
 from povlens.lens.paraxial import paraxial_data
-from povlens.cli.common import add_lens_arguments, load_lens, print_json
+from povlens.cli.common import add_lens_command, load_lens, print_json
 
 
 def register(sub) -> None:
-    p = sub.add_parser("inspect", help="print a lens's surfaces and first-order data",
-                       description="Print the surfaces of LENS and its paraxial data: focal "
-                                   "lengths, cardinal points, pupils, f-number.  Lengths in mm; "
-                                   "positions are signed, positive toward the film.")
-    add_lens_arguments(p)
+    p = add_lens_command(
+        sub, "inspect", run,
+        help="print a lens's surfaces and first-order data",
+        description="Print the surfaces of LENS and its paraxial data: focal "
+                    "lengths, cardinal points, pupils, f-number.  Lengths in mm; "
+                    "positions are signed, positive toward the film.")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.set_defaults(func=run)
 
 
 def inspect_dict(lens) -> dict:

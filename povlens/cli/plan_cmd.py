@@ -1,13 +1,13 @@
-"""``povlens plan SCENE --lens LENS --focus D``: the render method --method auto chooses."""
+"""``povlens plan SCENE --lens LENS [--focus D]``: the render method --method auto chooses."""
 
 from __future__ import annotations
 
 import math
 import tempfile
 
-from povlens.plan.convert import _sanitize, convert
 from povlens.cli.common import print_json
-from povlens.cli.render_cmd import _add_convert_arguments, options_from_args
+from povlens.cli.render_cmd import add_convert_arguments, options_from_args
+from povlens.plan.convert import convert
 
 
 def register(sub) -> None:
@@ -19,7 +19,7 @@ def register(sub) -> None:
                                    "and the numbers behind the choice.  With -o, OUTDIR is "
                                    "written as by 'convert --method auto' (plan.json records the "
                                    "decision).")
-    _add_convert_arguments(p)
+    add_convert_arguments(p)
     for a in p._actions:             # -o is optional here; --method is always auto
         if a.dest == "outdir":
             a.required = False
@@ -41,20 +41,22 @@ def run(args) -> int:
             args.outdir = tmp
             plan = convert(options_from_args(args))
             args.outdir = None
-    d = plan["decision"]
+    d = plan.decision
+    inp = plan.inputs
     if args.json:
-        print_json(_sanitize({"method": d["method"], "samples": plan["inputs"]["samples"],
-                    "decision": d, "outdir": args.outdir}))
+        print_json({"method": d.method, "samples": inp.samples, "focus": inp.focus,
+                    "focus_from": inp.focus_from, "decision": d.to_dict(),
+                    "outdir": args.outdir})
         return 0
-    print(f"{plan['inputs']['lens']}  f/{plan['lens']['f_number']:.3g}  focus "
-          f"{plan['inputs']['focus']:g} {plan['inputs']['units']}  "
-          f"{plan['inputs']['width']}x{plan['inputs']['height']}  tolerance "
-          f"{plan['inputs']['tolerance_px']:g} px")
-    print(f"method {d['method']}, {plan['inputs']['samples']} samples")
-    for r in d["reasons"]:
+    print(f"{inp.lens}  f/{plan.lens.f_number:.3g}  focus {inp.focus:g} {inp.units} (from "
+          f"{inp.focus_from})  {inp.width}x{inp.height}  tolerance {inp.tolerance_px:g} px")
+    if plan.depth_probe is not None and plan.depth_probe.scene_atmosphere:
+        print(f"note: {plan.depth_probe.scene_atmosphere}")
+    print(f"method {d.method}, {inp.samples} samples")
+    for r in d.reasons:
         print(f"  {r}")
     print("numbers:")
-    for k, v in d["numbers"].items():
+    for k, v in d.numbers.items():
         if isinstance(v, (list, dict)):
             continue
         print(f"  {k:28s} {_fmt(v)}")

@@ -3,6 +3,8 @@ pbrt's 64 boxes and with naive rear-element sampling."""
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 import math
 import re
 import sys
@@ -13,10 +15,16 @@ import numpy as np
 from povlens.errors import UsageError
 from povlens.lens.film import parse_film_size
 from povlens.lens.focus import UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_mm
-from povlens.lens.paraxial import paraxial_data
-from povlens.pupil.table import DEFAULT_TOLERANCE, build_pupil_table, load_if_current, plot_pupil_shapes
-from povlens.pupil.baselines import PBRT_INTERVALS, PBRT_RAYS_PER_INTERVAL, NaiveRearElement, PbrtBoxes
-from povlens.cli.common import add_lens_arguments, load_lens, positive_float, positive_int, print_json
+from povlens.lens.paraxial import ParaxialData, paraxial_data
+from povlens.lens.prescription import LensPrescription
+from povlens.pupil.baselines import (PBRT_INTERVALS, PBRT_RAYS_PER_INTERVAL, NaiveRearElement,
+                                     PbrtBoxes)
+from povlens.pupil.build import DEFAULT_TOLERANCE
+from povlens.pupil.plot import plot_pupil_shapes
+from povlens.pupil.storage import cached_pupil_table
+from povlens.pupil.table import PupilTable
+from povlens.cli.common import (add_lens_arguments, load_lens, positive_float, positive_int,
+                                print_json)
 
 
 def register(sub) -> None:
@@ -65,8 +73,6 @@ def register(sub) -> None:
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
     p.add_argument("--seed", type=int, default=0, help="seed of the scrambled Sobol points")
     p.set_defaults(func=run)
-
-
 
 
 _SUFFIX = re.compile(r"^\s*([-+0-9.eE]+)\s*(mm|cm|m|in)?\s*$")
@@ -129,93 +135,127 @@ def _summarise(pf, bands: int, per_band: int) -> dict:
 
 
 def run(args) -> int:
+    """Build (or reuse) the table, compare it with the baselines, print; exit code 0."""
     lens = load_lens(args)
     focus_mm = parse_focus_mm(args.focus, args.units)
     film = _film(args)
     hd = 0.5 * film["diagonal_mm"]
     p = paraxial_data(lens)
-    if args.exact_focus:
-        film_distance, _ = exact_film_distance_mm(lens, focus_mm, p)
-        method = "exact"
-    else:
-        film_distance = thick_lens_film_distance_mm(lens, focus_mm, p)
-        method = "thick-lens"
+    film_distance, method = _film_distance_mm(lens, focus_mm, p, args.exact_focus)
     meta = {"focus_distance_mm": None if math.isinf(focus_mm) else focus_mm,
             "focus_method": method, "film": film}
-
-    table = None
-    reused = False
-    if args.output:
-        table = load_if_current(args.output, lens, film_distance, hd,
-                                tolerance=args.tolerance, plane=args.plane)
-        reused = table is not None
-    if table is None:
-        with _progress(args, "pupil table") as bar:
-            table = build_pupil_table(lens, film_distance, hd, tolerance=args.tolerance,
-                                      plane=args.plane, progress=bar.update, metadata=meta)
-        if args.output:
-            table.save(args.output)
-
-    edges, radii = _band_radii(hd, args.bands, args.radii_per_band)
+    with _progress(args, "pupil table") as bar:
+        table, reused = cached_pupil_table(args.output, lens, film_distance, hd,
+                                           tolerance=args.tolerance, plane=args.plane,
+                                           progress=bar.update, metadata=meta)
     samplers = {"povlens": table}
     builds = {"povlens": {"time_s": table.stats.get("build_time_s"),
                           "rays_traced": table.stats.get("rays_traced"), "reused": reused}}
+    boxes = None
     if not args.no_compare:
-        with _progress(args, "pbrt boxes", PBRT_INTERVALS) as bar:
-            boxes = PbrtBoxes.build(lens, film_distance, hd, rays_per_interval=args.pbrt_rays,
-                                    progress=bar.update)
-        t0 = time.perf_counter()
-        naive = NaiveRearElement.build(lens, film_distance, hd)
-        naive_time = time.perf_counter() - t0
-        samplers["pbrt"] = boxes
-        samplers["naive"] = naive
-        measured = boxes.rays_per_interval == PBRT_RAYS_PER_INTERVAL
-        builds["pbrt"] = {"time_s": boxes.build_time_s, "rays_per_interval": args.pbrt_rays,
-                          "rays_traced": boxes.rays_traced,
-                          "time_at_pbrt_count_s": boxes.build_time_at_pbrt_count_s(),
-                          "time_at_pbrt_count_is": (
-                              "measured" if measured else
-                              "estimated: traced fraction x 64 x 2^20 x cost per traced ray")}
-        builds["naive"] = {"time_s": naive_time, "rays_traced": 0}
-    else:
-        boxes = None
-
+        boxes, naive, baseline_builds = _build_baselines(args, lens, film_distance, hd)
+        samplers.update(pbrt=boxes, naive=naive)
+        builds.update(baseline_builds)
+    edges, radii = _band_radii(hd, args.bands, args.radii_per_band)
     results = {name: _summarise(s.pass_fraction(radii, n_samples=args.samples, seed=args.seed),
                                 args.bands, args.radii_per_band)
                for name, s in samplers.items()}
-
     if args.plot:
         plot_radii = np.linspace(0.0, hd, 6)
         if table.vignetted_beyond_mm is not None:
             plot_radii = np.linspace(0.0, table.vignetted_beyond_mm * 0.999, 6)
         plot_pupil_shapes(table, args.plot, film_radii=plot_radii, boxes=boxes)
-
-    desc = table.describe()
+    report = _Report(args, lens, p, focus_mm, film, film_distance, method, table, reused,
+                     edges, results, builds)
     if args.json:
-        print_json({
-            "lens": lens.source, "focus_distance_mm": meta["focus_distance_mm"],
-            "focus_method": method, "film_distance_mm": film_distance,
-            "f_number": p.f_number, "stop_diameter_mm": p.stop_diameter, "film": film,
-            "table": desc, "table_file": args.output, "table_reused": reused,
-            "axial_irradiance_factor": table.axial_irradiance_factor,
-            "exposure_normalisation": table.exposure_normalisation(),
-            "samples_per_radius": args.samples,
-            "bands": [{"film_radius_mm": [float(edges[i]), float(edges[i + 1])],
-                       **{name: results[name]["bands"][i] for name in results}}
-                      for i in range(args.bands)],
-            "all": {name: results[name]["all"] for name in results},
-            "build": builds, "plot": args.plot})
-        return 0
+        _print_json(report)
+    else:
+        _print_text(report)
+    return 0
 
+
+def _film_distance_mm(lens, focus_mm: float, p, exact: bool) -> tuple[float, str]:
+    """Film distance for the focus: real-ray (``exact``) or thick-lens; and the method name."""
+    if exact:
+        return exact_film_distance_mm(lens, focus_mm, p)[0], "exact"
+    return thick_lens_film_distance_mm(lens, focus_mm, p), "thick-lens"
+
+
+def _build_baselines(args, lens, film_distance: float, hd: float):
+    """pbrt's boxes and naive rear-element sampling, and their build records."""
+    with _progress(args, "pbrt boxes", PBRT_INTERVALS) as bar:
+        boxes = PbrtBoxes.build(lens, film_distance, hd, rays_per_interval=args.pbrt_rays,
+                                progress=bar.update)
+    t0 = time.perf_counter()
+    naive = NaiveRearElement.build(lens, film_distance, hd)
+    naive_time = time.perf_counter() - t0
+    measured = boxes.rays_per_interval == PBRT_RAYS_PER_INTERVAL
+    builds = {"pbrt": {"time_s": boxes.build_time_s, "rays_per_interval": args.pbrt_rays,
+                       "rays_traced": boxes.rays_traced,
+                       "time_at_pbrt_count_s": boxes.build_time_at_pbrt_count_s(),
+                       "time_at_pbrt_count_is": (
+                           "measured" if measured else
+                           "estimated: traced fraction x 64 x 2^20 x cost per traced ray")},
+              "naive": {"time_s": naive_time, "rays_traced": 0}}
+    return boxes, naive, builds
+
+
+@dataclasses.dataclass(frozen=True)
+class _Report:
+    """Everything the command prints."""
+
+    args: argparse.Namespace
+    lens: LensPrescription
+    paraxial: ParaxialData
+    focus_mm: float
+    film: dict
+    film_distance: float
+    method: str
+    table: PupilTable
+    reused: bool
+    edges: np.ndarray
+    results: dict
+    builds: dict
+
+
+def _print_json(r: _Report) -> None:
+    """The whole report as one JSON object."""
+    args, p, table = r.args, r.paraxial, r.table
+    print_json({
+        "lens": r.lens.source, "focus_distance_mm": None if math.isinf(r.focus_mm) else r.focus_mm,
+        "focus_method": r.method, "film_distance_mm": r.film_distance,
+        "f_number": p.f_number, "stop_diameter_mm": p.stop_diameter, "film": r.film,
+        "table": table.describe(), "table_file": args.output, "table_reused": r.reused,
+        "axial_irradiance_factor": table.axial_irradiance_factor,
+        "exposure_normalisation": table.exposure_normalisation(),
+        "samples_per_radius": args.samples,
+        "bands": [{"film_radius_mm": [float(r.edges[i]), float(r.edges[i + 1])],
+                   **{name: r.results[name]["bands"][i] for name in r.results}}
+                  for i in range(args.bands)],
+        "all": {name: r.results[name]["all"] for name in r.results},
+        "build": r.builds, "plot": args.plot})
+
+
+def _print_text(r: _Report) -> None:
+    """The report for a reader: the table, then the comparison."""
+    _print_table_summary(r)
+    _print_comparison(r)
+    if r.args.plot:
+        print(f"plot: {r.args.plot}")
+
+
+def _print_table_summary(r: _Report) -> None:
+    """Lens, focus and film; the table's plane, size, exposure and warnings."""
+    args, p, table, film = r.args, r.paraxial, r.table, r.film
     typed = args.focus.strip().replace(" ", "")
     if not typed[-1:].isalpha():
         typed = f"{typed} {args.units}"
-    focus_txt = ("infinity" if math.isinf(focus_mm) else
-                 typed if typed.endswith("mm") else f"{typed} = {focus_mm:g} mm")
+    focus_txt = ("infinity" if math.isinf(r.focus_mm) else
+                 typed if typed.endswith("mm") else f"{typed} = {r.focus_mm:g} mm")
     film_txt = (f"{film['width_mm']:g} x {film['height_mm']:g} mm film"
                 if "width_mm" in film else f"{film['diagonal_mm']:g} mm film diagonal")
-    print(f"{lens.source} focused at {focus_txt}: film distance {film_distance:.4f} mm "
-          f"({method}); F/{p.f_number:.3g} (stop {p.stop_diameter:.4g} mm); {film_txt}")
+    print(f"{r.lens.source} focused at {focus_txt}: film distance {r.film_distance:.4f} mm "
+          f"({r.method}); F/{p.f_number:.3g} (stop {p.stop_diameter:.4g} mm); {film_txt}")
     st = table.stats
     print(f"pupil table: {table.plane} plane at z = {table.plane_z_mm:.3f} mm, "
           f"{table.n_knots} knots x {table.n_angles} angles, tolerance {table.tolerance:g}, "
@@ -235,9 +275,14 @@ def run(args) -> int:
         print("  warning: the knot limit was reached before the tolerance was met; the "
               "table is conservative by measured margins but looser there")
     if args.output:
-        print(f"  {'reused' if reused else 'saved to'} {args.output}"
-              + (" (inputs unchanged)" if reused else ""))
-    names = list(samplers)
+        print(f"  {'reused' if r.reused else 'saved to'} {args.output}"
+              + (" (inputs unchanged)" if r.reused else ""))
+
+
+def _print_comparison(r: _Report) -> None:
+    """Pass fractions per band of film radius, and the build times."""
+    args, results, builds = r.args, r.results, r.builds
+    names = list(results)
     labels = {"povlens": "povlens table", "pbrt": f"pbrt {PBRT_INTERVALS} boxes",
               "naive": "naive rear element"}
     print()
@@ -249,7 +294,7 @@ def run(args) -> int:
         return f"{'vignetted':>22}" if v is None else f"{v['min']:>13.3f} / {v['mean']:.3f}"
 
     for i in range(args.bands):
-        print(f"  {edges[i]:6.2f} - {edges[i + 1]:6.2f}    "
+        print(f"  {r.edges[i]:6.2f} - {r.edges[i + 1]:6.2f}    "
               + "".join(cell(results[n]["bands"][i]) for n in names))
     print(f"  {'all radii':<18}" + "".join(
         f"{'(none)':>22}" if results[n]['all']['worst'] is None else
@@ -258,7 +303,7 @@ def run(args) -> int:
     print("build time:")
     b = builds["povlens"]
     print(f"  {'povlens table':<20} {b['time_s']:9.3f} s  ({b['rays_traced']:,} rays"
-          + (", reused from file" if reused else "") + ")")
+          + (", reused from file" if r.reused else "") + ")")
     if "pbrt" in builds:
         b = builds["pbrt"]
         print(f"  {labels['pbrt']:<20} {b['time_s']:9.3f} s  ({b['rays_per_interval']:,} rays per "
@@ -267,6 +312,3 @@ def run(args) -> int:
             print(f"  {'  at pbrt 2^20/interval':<20} {b['time_at_pbrt_count_s']:9.1f} s  "
                   f"(estimated from the traced fraction and the cost per traced ray)")
         print(f"  {labels['naive']:<20} {builds['naive']['time_s']:9.3f} s  (no table)")
-    if args.plot:
-        print(f"plot: {args.plot}")
-    return 0

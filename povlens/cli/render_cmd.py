@@ -1,15 +1,20 @@
-"""``povlens convert`` / ``render`` / ``composite`` / ``render-batch`` / ``render-view``."""
+"""``povlens convert`` / ``render`` / ``composite`` / ``render-batch`` / ``render-view``.
+
+The rendering commands import :mod:`povlens.render.samples` when they run: it loads
+OpenImageIO and tqdm (~0.3 s), which ``povlens convert`` does not need.
+"""
 
 from __future__ import annotations
 
 import argparse
 import os
 
-from povlens.plan.convert import METHODS, ConvertOptions, convert
+from povlens.cli.common import positive_float, print_json
 from povlens.errors import UsageError
 from povlens.lens.film import parse_film_size
 from povlens.lens.focus import UNITS_MM
-from povlens.cli.common import positive_float, print_json
+from povlens.plan.convert import METHODS, ConvertOptions, convert
+from povlens.plan.schema import Plan
 
 
 def _vector(text: str):
@@ -18,16 +23,37 @@ def _vector(text: str):
     except ValueError:
         v = ()
     if len(v) != 3:
-        import argparse
         raise argparse.ArgumentTypeError(f"'{text}' is not a vector x,y,z")
     return v
 
 
-def _add_convert_arguments(p) -> None:
+def _pixel(text: str) -> tuple[int, int]:
+    """``X,Y``: the 0-based column and row of an output pixel (argparse type)."""
+    try:
+        x, y = (int(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a pixel X,Y (column, row: "
+                                         f"whole numbers from 0)") from None
+    if x < 0 or y < 0:
+        raise argparse.ArgumentTypeError(f"'{text}': the column and row count from 0")
+    return x, y
+
+
+def add_convert_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of a conversion (SCENE, --lens, --focus, ..., -o OUTDIR, --json):
+    ``convert``, ``render`` and ``plan`` take them (:func:`options_from_args`)."""
     p.add_argument("scene", metavar="SCENE.pov", help="an ordinary POV-Ray scene (not modified)")
     p.add_argument("--lens", required=True, help="lens file or bundled lens name")
-    p.add_argument("--focus", type=positive_float, required=True, metavar="DIST",
-                   help="distance from the camera location to the plane in focus, scene units")
+    f = p.add_mutually_exclusive_group()
+    f.add_argument("--focus", type=positive_float, metavar="DIST",
+                   help="distance from the camera location to the plane in focus, scene "
+                        "units (default: the scene camera's focal_point if it has focal "
+                        "blur, else the distance to its look_at, else what the depth probe "
+                        "sees at the centre of the frame)")
+    f.add_argument("--focus-at", type=_pixel, metavar="X,Y",
+                   help="focus on what the depth probe sees at output pixel X,Y (column "
+                        "and row from the top left, 0-based; the median distance of the "
+                        "surface under it in a 5x5 pixel window)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--f-number", type=positive_float, metavar="N", help="stop down to f/N")
     g.add_argument("--stop-diameter", type=positive_float, metavar="MM",
@@ -76,6 +102,8 @@ def _add_convert_arguments(p) -> None:
 
 
 def options_from_args(args) -> ConvertOptions:
+    """The :class:`~povlens.plan.options.ConvertOptions` of parsed
+    :func:`add_convert_arguments` options."""
     if args.width < 1 or args.height < 1:
         raise UsageError(f"--width/--height {args.width}x{args.height}: must be at least 1 pixel")
     if args.samples is not None and args.samples < 1:
@@ -83,7 +111,8 @@ def options_from_args(args) -> ConvertOptions:
     if args.batch_size is not None and args.batch_size < 1:
         raise UsageError(f"--batch-size {args.batch_size}: must be at least 1")
     return ConvertOptions(
-        scene=args.scene, lens=args.lens, focus=args.focus, outdir=args.outdir,
+        scene=args.scene, lens=args.lens, focus=args.focus, focus_at=args.focus_at,
+        outdir=args.outdir,
         f_number=args.f_number, stop_diameter_mm=args.stop_diameter,
         film_diagonal_mm=args.film_diagonal,
         film_size_mm=parse_film_size(args.film_size) if args.film_size else None,
@@ -96,29 +125,31 @@ def options_from_args(args) -> ConvertOptions:
         adaptive=bool(args.adaptive))
 
 
-def _summary(plan: dict) -> str:
-    f, m, e = plan["focus"], plan["thin_lens"], plan["model_error"]
-    cam = plan["povray_camera"]
+def _summary(plan: Plan) -> str:
+    f, m, e = plan.focus, plan.thin_lens, plan.model_error
+    cam = plan.povray_camera
+    atmosphere = plan.depth_probe.scene_atmosphere if plan.depth_probe is not None else None
     return "\n".join([
-        f"lens {plan['inputs']['lens']}  f/{plan['lens']['f_number']:.3g}  "
-        f"EFL {plan['lens']['efl_mm']:.2f} mm",
-        f"film distance {f['film_distance_mm']:.4f} mm (thick lens "
-        f"{f['thick_lens_film_distance_mm']:.4f} mm)",
-        f"equivalent thin lens: hfov {cam['hfov_deg']:.3f} deg, pupil "
-        f"{m['pupil_diameter_mm']:.3f} mm, focal_blur aperture {cam['aperture']:.6g}",
+        f"lens {plan.inputs.lens}  f/{plan.lens.f_number:.3g}  EFL {plan.lens.efl_mm:.2f} mm",
+        f"focus {plan.inputs.focus:.6g} {plan.inputs.units} (from "
+        f"{plan.inputs.focus_from or 'option'})",
+        f"film distance {f.film_distance_mm:.4f} mm (thick lens "
+        f"{f.thick_lens_film_distance_mm:.4f} mm)",
+        f"equivalent thin lens: hfov {cam.hfov_deg:.3f} deg, pupil "
+        f"{m.pupil_diameter_mm:.3f} mm, focal_blur aperture {cam.aperture:.6g}",
         f"model error: distortion <= {e['max_distortion_px']:.3f} px, blur size <= "
         f"{e['max_blur_size_error_px']:.3f} px, illumination >= "
         f"{e['min_relative_illumination']:.3f} of the centre",
-        f"method {plan['inputs']['method']}, {plan['inputs']['samples']} samples"
-        + (" (chosen by --method auto: " + plan["decision"]["reasons"][-1].removeprefix("-> ")
-           + ")" if "decision" in plan else ""),
-    ])
+        f"method {plan.inputs.method}, {plan.inputs.samples} samples"
+        + (" (chosen by --method auto: " + plan.decision.reasons[-1].removeprefix("-> ")
+           + ")" if plan.decision is not None else ""),
+    ] + ([f"note: {atmosphere}"] if atmosphere else []))
 
 
 def run_convert(args) -> int:
     plan = convert(options_from_args(args))
     if args.json:
-        print_json(plan)
+        print_json(plan.to_dict())
     else:
         print(_summary(plan))
         print(f"wrote {args.outdir}/plan.json and {args.outdir}/Makefile; "
@@ -126,17 +157,8 @@ def run_convert(args) -> int:
     return 0
 
 
-def _unwind_on_sigterm() -> None:
-    """Terminated (make, a batch system, kill): unwind as on Ctrl-C, so the POV-Ray
-    processes started are stopped and their partial files removed."""
-    import signal
-    import sys
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
-
-
 def run_render(args) -> int:
     from povlens.render.samples import convert_and_render
-    _unwind_on_sigterm()
     _, out = convert_and_render(options_from_args(args), jobs=args.jobs, quiet=args.quiet,
                                 on_plan=None if args.quiet else
                                 (lambda plan: print(_summary(plan))))
@@ -153,7 +175,6 @@ def run_composite(args) -> int:
 
 def run_batch(args) -> int:
     from povlens.render.samples import render_batch
-    _unwind_on_sigterm()
     render_batch(args.outdir, args.batch, in_flight=args.in_flight)
     return 0
 
@@ -169,14 +190,14 @@ def register(sub) -> None:
                        description="Write OUTDIR with a plan (plan.json), POV-Ray wrappers that "
                                    "include SCENE and replace its camera, and a Makefile that "
                                    "renders them ('make -C OUTDIR -j2').  SCENE is not modified.")
-    _add_convert_arguments(p)
+    add_convert_arguments(p)
     p.set_defaults(func=run_convert)
 
     p = sub.add_parser("render", help="convert, render with POV-Ray and composite in one go",
                        description="Like 'convert', then render every lens sample with POV-Ray "
                                    "(in parallel) and composite OUTDIR/image.exr and image.png. "
                                    "Re-running resumes an interrupted render.")
-    _add_convert_arguments(p)
+    add_convert_arguments(p)
     p.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1,
                    help="cores to use: up to 4 POV-Ray processes per core run at once "
                         "(each spends most of its ~0.6 s start-up idle; default: number "

@@ -9,21 +9,21 @@ import numpy as np
 
 from povlens.errors import UsageError
 from povlens.lens.tracer import trace_from_film
-from povlens.cli.common import add_lens_arguments, load_lens, positive_float, print_json
+from povlens.cli.common import add_lens_command, load_lens, positive_float, print_json
 
 
 def register(sub) -> None:
-    p = sub.add_parser("trace", help="trace rays given as JSON from the film to the scene",
-                       description='Read {"rays": [{"origin": [x,y,z], "direction": [dx,dy,dz]}, '
-                                   '...]} on stdin, in the camera frame (origin at the film '
-                                   'centre, +z toward the scene, mm), trace them from the film '
-                                   'through LENS, and print {"rays": [...]} with each ray where '
-                                   'it leaves the front surface (unit direction), or null when '
-                                   'the lens blocks it.')
-    add_lens_arguments(p)
+    p = add_lens_command(
+        sub, "trace", run,
+        help="trace rays given as JSON from the film to the scene",
+        description='Read {"rays": [{"origin": [x,y,z], "direction": [dx,dy,dz]}, '
+                    '...]} on stdin, in the camera frame (origin at the film '
+                    'centre, +z toward the scene, mm), trace them from the film '
+                    'through LENS, and print {"rays": [...]} with each ray where '
+                    'it leaves the front surface (unit direction), or null when '
+                    'the lens blocks it.')
     p.add_argument("--film-distance", type=positive_float, required=True, metavar="MM",
                    help="distance from the film to the rear vertex, mm (see 'povlens focus')")
-    p.set_defaults(func=run)
 
 
 def parse_rays(text: str) -> tuple[np.ndarray, np.ndarray]:

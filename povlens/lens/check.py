@@ -1,11 +1,11 @@
 """Cross-check of the fast tracer against the reference tracer (``povlens check``).
 
 :func:`check_lens` traces the same rays film -> scene with the vectorized tracer
-(:mod:`povlens.tracer`) and with the one-ray-at-a-time reference tracer
-(:mod:`povlens.reference_tracer`, a different derivation) and compares them.
+(:mod:`povlens.lens.tracer`) and with the one-ray-at-a-time reference tracer
+(:mod:`povlens.lens.reference_tracer`, a different derivation) and compares them.
 This module is pure: it prints nothing and writes no files.
 
-Ray set (camera frame of :mod:`povlens.frames`, mm)
+Ray set (camera frame of :mod:`povlens.lens.frames`, mm)
 --------------------------------------------------
 * ``n_film`` film points on z = 0 filling the disc of diameter ``film_diagonal_mm``
   (so any frame of that diagonal is covered): a sunflower (Vogel) spiral with
@@ -30,7 +30,7 @@ Comparison
   (``|cos_i|`` or the intersection slope ``|F'|`` <= 1e-6), the TIR limit
   (``|1 - sin^2 theta_t|`` <= 1e-6), an axial direction component ``|d_z|`` <= 1e-6
   (turning back), a ray parameter within 0.5e-9 mm of the -1e-9 mm backward
-  limit, or Newton non-convergence.  See :mod:`povlens.reference_tracer`.  Rounding can
+  limit, or Newton non-convergence.  See :mod:`povlens.lens.reference_tracer`.  Rounding can
   legitimately decide such rays either way; a disagreement anywhere else is a bug.
 * ``ok``: max position diff <= 1e-9 mm, max direction diff <= 1e-12, and no
   disagreement away from an edge.

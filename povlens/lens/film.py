@@ -1,6 +1,6 @@
 """The film: its physical size, its pixels, and where each pixel lies.
 
-Film coordinates are the x, y of the camera frame (:mod:`povlens.frames`), in mm.
+Film coordinates are the x, y of the camera frame (:mod:`povlens.lens.frames`), in mm.
 The lens inverts the image, so the pixel at image position (u right, v up) lies
 at film point (-u, -v): pixel column i, row j (row 0 at the top) with sub-pixel
 offset (jx, jy) in [0, 1) has
@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from povlens.errors import UsageError
+from povlens.errors import ParameterError
 
 __all__ = ["Film", "parse_film_size"]
 
@@ -33,11 +33,14 @@ class Film:
 
     @classmethod
     def from_diagonal(cls, diagonal_mm: float, width_px: int, height_px: int) -> "Film":
-        """pbrt's rule: the film's aspect ratio is the image's (realistic-camera.md §1.2)."""
+        """pbrt's rule: the film's aspect ratio is the image's (pbrt-v4's film ``diagonal``)."""
         if not (diagonal_mm > 0):
-            raise UsageError(f"--film-diagonal {diagonal_mm}: must be positive")
+            raise ParameterError("diagonal_mm", diagonal_mm,
+                                 f"diagonal_mm={diagonal_mm}: must be positive")
         if width_px < 1 or height_px < 1:
-            raise UsageError(f"--width/--height {width_px}x{height_px}: must be at least 1")
+            bad, value = ("width_px", width_px) if width_px < 1 else ("height_px", height_px)
+            raise ParameterError(bad, value, f"width_px={width_px}, height_px={height_px}: "
+                                             f"must be at least 1")
         a = height_px / width_px
         w = math.sqrt(diagonal_mm ** 2 / (1.0 + a * a))
         return cls(w, a * w, int(width_px), int(height_px))
@@ -72,11 +75,13 @@ class Film:
 
 
 def parse_film_size(text: str) -> tuple[float, float]:
-    """'W,H' in mm -> (W, H); a clear error naming --film-size otherwise."""
+    """'W,H' in mm -> (W, H) (``film_size_mm``); a ParameterError otherwise."""
     try:
         w, h = (float(t) for t in text.split(","))
     except ValueError:
-        raise UsageError(f"--film-size {text}: expected W,H in mm, e.g. 36,24") from None
+        raise ParameterError("film_size_mm", text, f"film_size_mm={text!r}: expected W,H in mm, "
+                                                   f"e.g. 36,24") from None
     if not (w > 0 and h > 0 and math.isfinite(w) and math.isfinite(h)):
-        raise UsageError(f"--film-size {text}: width and height must be positive")
+        raise ParameterError("film_size_mm", text,
+                             f"film_size_mm={text!r}: width and height must be positive")
     return w, h

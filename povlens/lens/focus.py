@@ -22,7 +22,7 @@ import math
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from povlens.errors import OpticsError, UsageError
+from povlens.errors import OpticsError, ParameterError
 from povlens.lens.paraxial import ParaxialData, paraxial_data
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_scene
@@ -38,7 +38,8 @@ def to_mm(value: float, units: str) -> float:
     try:
         return float(value) * UNITS_MM[units]
     except KeyError:
-        raise UsageError(f"--units {units}: unknown unit", "use one of mm, cm, m, in") from None
+        raise ParameterError("units", units, f"units={units!r}: unknown unit",
+                             "use one of mm, cm, m, in") from None
 
 
 def _hiatus_terms(p: ParaxialData) -> float:
@@ -143,12 +144,12 @@ def exact_film_distance_mm(lens: LensPrescription, distance_mm: float,
     if not math.isfinite(spot):
         raise OpticsError(f"{lens.source}: no real ray from the object at {distance_mm:g} mm "
                           f"reaches the film; cannot focus with real rays",
-                          "check the stop diameter (--stop-diameter / --f-number)")
+                          "check the stop diameter ('stop_diameter_mm' / 'f_number')")
     if at_edge:
         raise OpticsError(f"{lens.source}: the real-ray focus for {distance_mm:g} mm lies more "
                           f"than {half:.3g} mm from the thick-lens focus; the lens is too "
                           f"aberrated to focus by RMS spot",
-                          "stop the lens down (--f-number) and try again")
+                          "stop the lens down ('f_number') and try again")
     return best, spot
 
 
@@ -179,7 +180,8 @@ class FocusResult:
 def focus(lens: LensPrescription, distance_mm: float) -> FocusResult:
     """Thick-lens and exact real-ray focus for an object ``distance_mm`` from the film."""
     if not (distance_mm > 0):
-        raise UsageError(f"--distance {distance_mm:g}: the object distance must be positive")
+        raise ParameterError("distance_mm", distance_mm, f"distance_mm={distance_mm:g}: the "
+                                                         f"object distance must be positive")
     p = paraxial_data(lens)
     thick = thick_lens_film_distance_mm(lens, distance_mm, p)
     exact, spot = exact_film_distance_mm(lens, distance_mm, p, thick)

@@ -19,14 +19,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 
-from povlens.errors import OpticsError, UsageError
+from povlens.errors import NominalFNumberWarning, OpticsError, ParameterError, UsageError
 from povlens.lens.prescription import LensPrescription
 
 __all__ = ["ParaxialData", "paraxial_data", "system_matrix", "axial_ray_heights",
-           "stop_index", "stopped_down", "lensmaker_focal_length_mm", "image_of_object"]
+           "stop_index", "stopped_down", "lensmaker_focal_length_mm", "image_of_object",
+           "NOMINAL_F_NUMBER_TOLERANCE"]
+
+#: An f-number this much (relative) faster than the lens's widest is taken as the lens
+#: wide open: makers round the engraved f-number (a 50 mm "f/2" that opens to F/2.03).
+NOMINAL_F_NUMBER_TOLERANCE = 0.05
 
 
 def _refraction(c: float, n: float, n_after: float) -> np.ndarray:
@@ -168,13 +174,37 @@ def stopped_down(lens: LensPrescription, *, stop_diameter_mm: float | None = Non
                  f_number: float | None = None) -> LensPrescription:
     """A copy of ``lens`` with its aperture stop set by diameter or f-number.
 
-    The stop cannot open beyond the diameter in the file.  Raises UsageError
-    with the allowed range otherwise.
+    The stop cannot open beyond the diameter in the file.  An f-number up to
+    ``NOMINAL_F_NUMBER_TOLERANCE`` (5 %) faster than the widest is a nominal one:
+    the lens is used wide open, with a :class:`~povlens.errors.NominalFNumberWarning`.
+
+    Parameters
+    ----------
+    lens : LensPrescription
+        The lens, its stop at the diameter in the file.
+    stop_diameter_mm : float, optional
+        The stop diameter, mm.
+    f_number : float, optional
+        The f-number (EFL / entrance-pupil diameter); not with ``stop_diameter_mm``.
+
+    Returns
+    -------
+    LensPrescription
+        ``lens`` itself when neither is given, else a copy with the stop set.
+
+    Raises
+    ------
+    ParameterError
+        Naming ``f_number`` or ``stop_diameter_mm``, with the allowed range, for a
+        value beyond what the lens opens to (or not positive).
+    UsageError
+        When the lens has no aperture row to stop down.
     """
     if stop_diameter_mm is None and f_number is None:
         return lens
     if stop_diameter_mm is not None and f_number is not None:
-        raise UsageError("give either --f-number or --stop-diameter, not both")
+        raise ParameterError("f_number", f_number,
+                             "give either 'f_number' or 'stop_diameter_mm', not both")
     s = stop_index(lens)
     if not lens.is_aperture[s]:
         raise UsageError(f"{lens.source}: the lens has no aperture row to stop down (its beam is "
@@ -183,20 +213,31 @@ def stopped_down(lens: LensPrescription, *, stop_diameter_mm: float | None = Non
     max_d = lens.max_stop_diameter_mm or float(lens.aperture_diameter_mm[s])
     if f_number is not None:
         if not (f_number > 0 and math.isfinite(f_number)):
-            raise UsageError(f"--f-number {f_number}: must be a positive number")
+            raise ParameterError("f_number", f_number,
+                                 f"f_number={f_number}: must be a positive number")
         full = paraxial_data(lens.with_aperture_diameter(s, max_d))
         (sa, _), _ = system_matrix(lens, 0, s, include_last_refraction=False)
         stop_diameter_mm = full.efl / f_number * abs(sa)
         if stop_diameter_mm > max_d * (1 + 1e-12):
-            raise UsageError(f"--f-number {f_number:g}: {lens.source} opens only to "
-                             f"F/{full.f_number:.3g}",
-                             f"use --f-number {math.ceil(full.f_number * 100) / 100:g} or more")
+            if f_number < full.f_number * (1 - NOMINAL_F_NUMBER_TOLERANCE):
+                raise ParameterError("f_number", f_number,
+                                     f"f_number={f_number:g}: {lens.source} opens only to "
+                                     f"F/{full.f_number:.3g}",
+                                     f"use f_number={math.ceil(full.f_number * 100) / 100:g} "
+                                     f"or more")
+            warnings.warn(NominalFNumberWarning(
+                f"f_number={f_number:g}: {lens.source} opens only to F/{full.f_number:.3g}; "
+                f"taken as a nominal f-number (within {NOMINAL_F_NUMBER_TOLERANCE:.0%}), the "
+                f"lens is used wide open"), stacklevel=2)
         stop_diameter_mm = min(stop_diameter_mm, max_d)
     if not (stop_diameter_mm > 0 and math.isfinite(stop_diameter_mm)):
-        raise UsageError(f"--stop-diameter {stop_diameter_mm}: must be a positive number of mm")
+        raise ParameterError("stop_diameter_mm", stop_diameter_mm,
+                             f"stop_diameter_mm={stop_diameter_mm}: must be a positive number "
+                             f"of mm")
     if stop_diameter_mm > max_d * (1 + 1e-12):
-        raise UsageError(f"--stop-diameter {stop_diameter_mm:g} mm: the stop of {lens.source} "
-                         f"opens only to {max_d:g} mm")
+        raise ParameterError("stop_diameter_mm", stop_diameter_mm,
+                             f"stop_diameter_mm={stop_diameter_mm:g}: the stop of {lens.source} "
+                             f"opens only to {max_d:g} mm")
     return lens.with_aperture_diameter(s, stop_diameter_mm)
 
 

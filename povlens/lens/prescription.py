@@ -11,14 +11,17 @@ File format (pbrt / Kolb et al. 1995), one row per surface, object side first:
   the distance to the film and is replaced when the lens is focused.
 * ``index_after`` is the refractive index (d line) after the surface; 0 means air.
 * ``aperture_diameter`` is the clear diameter (for an aperture: its maximum).
+  A diameter larger than the surface can physically be (beyond the sphere, or
+  past where the faces of an element or across an air gap meet) is read as a
+  housing diameter and clipped, with a :class:`~povlens.errors.LensClipWarning`.
 * An optional 5th column carries the Abbe number V_d of the medium after the
   surface (kept for dispersion; 0 = unknown).
 * ``#`` starts a comment anywhere on a line; tabs or spaces; LF or CRLF.
 
 The old Kolb / CS348B tables (100 mm scale: ``dgauss.dat``, ``wide.dat``) store
-in column 2 the distance from the *previous* vertex.  They are recognised by the
-rule of ``../shared/reference/realistic-camera.md`` §1.3 (first row's column 2
-is 0 and the last row's is not) and converted on reading: ``t[i] = axpos[i+1]``.
+in column 2 the distance from the *previous* vertex.  They are recognised by
+their first row's column 2 being 0 while the last row's is not, and converted on
+reading: ``t[i] = axpos[i+1]``.
 """
 
 from __future__ import annotations
@@ -27,15 +30,16 @@ import dataclasses
 import hashlib
 import math
 import os
-import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from povlens.errors import LensFileError
+from povlens.errors import LensClipWarning, LensFileError
+from povlens.util.files import write_bytes
 
 __all__ = ["LensPrescription", "read_lens", "parse_lens_text", "write_lens", "format_lens",
-           "sag_mm", "resolve_lens_path"]
+           "sag_mm", "resolve_lens_path", "clip_to_physical_apertures"]
 
 AIR = 1.0
 #: Surfaces may touch (files round data to ~6 digits) but not cross by more than this.
@@ -44,6 +48,8 @@ CROSSING_TOLERANCE_MM = 1e-5
 #: thickness (mm), and the largest refractive index.
 MIN_LENGTH_MM, MAX_LENGTH_MM = 1e-6, 1e20
 MAX_INDEX = 10.0
+#: Radii at which neighbouring surfaces are checked for crossing.
+_CROSSING_GRID = 257
 
 
 def sag_mm(curvature_per_mm: float | np.ndarray, r_mm: np.ndarray) -> np.ndarray:
@@ -142,6 +148,33 @@ class LensPrescription:
         d[row] = diameter_mm
         return self.replace(aperture_diameter_mm=d)
 
+    def sub_lens(self, first: int) -> "LensPrescription":
+        """The rows ``first``..end as a lens of their own, seen from inside the full lens.
+
+        For the same film distance the vertices stay where they are in the full
+        lens (the rows toward the film are unchanged).  Refractive indices are
+        divided by the index in front of row ``first``, so that every index
+        *ratio* (all Snell's law sees) is the full lens's and the sub-lens may
+        start inside glass.  A ray traced from the film through it leaves at
+        surface ``first``.
+
+        Parameters
+        ----------
+        first : index of the sub-lens's front row, 0 <= first < n_surfaces.
+
+        Returns
+        -------
+        LensPrescription
+            With n_surfaces - first rows (arrays (n_surfaces - first,)).
+        """
+        if not 0 <= first < self.n_surfaces:
+            raise IndexError(f"row {first}: the lens has rows 0..{self.n_surfaces - 1}")
+        sl = slice(first, None)
+        return self.replace(radius_mm=self.radius_mm[sl], thickness_mm=self.thickness_mm[sl],
+                            index_after=self.index_after[sl] / self.index_before[first],
+                            aperture_diameter_mm=self.aperture_diameter_mm[sl],
+                            abbe_vd=self.abbe_vd[sl], lines=self.lines[sl])
+
     def __eq__(self, other) -> bool:  # optical equality, used by round-trip tests
         if not isinstance(other, LensPrescription):
             return NotImplemented
@@ -203,7 +236,11 @@ _COLUMNS = ("radius", "thickness", "index", "aperture diameter", "Abbe number")
 
 
 def parse_lens_text(text: str, source: str = "<string>") -> LensPrescription:
-    """Parse the text of a lens file; ``source`` names it in error messages."""
+    """Parse the text of a lens file; ``source`` names it in error messages.
+
+    Apertures larger than their surfaces can be are clipped, one
+    :class:`~povlens.errors.LensClipWarning` per row (:func:`clip_to_physical_apertures`).
+    """
     rows: list[list[float]] = []
     lines: list[int] = []
     comments: list[str] = []
@@ -258,11 +295,6 @@ def parse_lens_text(text: str, source: str = "<string>") -> LensPrescription:
                                 "column 2 is the axial distance to the next surface")
         if abbe[i] < 0.0:
             raise LensFileError(source, ln, f"Abbe number {abbe[i]:g} is negative")
-        if radius[i] != 0.0 and 0.5 * diam[i] > abs(radius[i]):
-            raise LensFileError(source, ln,
-                                f"clear aperture diameter {diam[i]:g} mm is larger than the "
-                                f"sphere of radius {abs(radius[i]):g} mm allows",
-                                "check the radius and aperture columns")
     index = np.where(index == 0.0, AIR, index)
     if index[-1] != AIR:
         raise LensFileError(source, lines[-1], f"the medium after the last surface has index "
@@ -270,11 +302,103 @@ def parse_lens_text(text: str, source: str = "<string>") -> LensPrescription:
 
     lens = LensPrescription(radius, thick, index, diam, abbe, source=source, lines=tuple(lines),
                             file_format=file_format, comments=tuple(comments))
-    _check_surfaces_do_not_cross(lens)
+    lens = clip_to_physical_apertures(lens)
     ap = lens.is_aperture
     if ap.any():
-        lens = lens.replace(max_stop_diameter_mm=float(np.max(diam[ap])))
+        lens = lens.replace(max_stop_diameter_mm=float(np.max(lens.aperture_diameter_mm[ap])))
     return lens
+
+
+def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
+    """``lens`` with every aperture clipped to where its surface physically ends.
+
+    Published prescriptions often give a housing (mount) radius, not the clear
+    aperture.  A row's semi-aperture is limited by
+
+    1. its sphere: a cap exists only out to r = |R| (a hemisphere);
+    2. each neighbour: the height where the two faces meet, i.e. the first root of
+       the axial gap ``t_i + s_(i+1)(r) - s_i(r)`` (the element's edge thickness, or
+       the air gap between two elements).  The gap is monotonic in r for two spheres,
+       so the root is bracketed on the crossing check's grid and bisected; both rows
+       are clipped to it (the element ends there, or the two elements touch there).
+
+    Pairs are taken front to back with the apertures clipped so far.  Gaps that close
+    by no more than ``CROSSING_TOLERANCE_MM`` are kept (rounded data); faces that
+    cross at the axis itself are refused (no light could pass).
+
+    Parameters
+    ----------
+    lens : LensPrescription
+        As read, apertures as stated in the file.
+
+    Returns
+    -------
+    LensPrescription
+        ``lens`` itself when nothing needs clipping, else a copy with the clipped
+        diameters; one :class:`~povlens.errors.LensClipWarning` per clipped row.
+
+    Raises
+    ------
+    LensFileError
+        When neighbouring faces cross at the axis ("physically impossible").
+    """
+    a = lens.aperture_radius_mm.copy()
+    why: dict[int, str] = {}
+    radius, c = lens.radius_mm, lens.curvature_per_mm
+    for i in np.flatnonzero((radius != 0.0) & (a > np.abs(radius))):
+        a[i] = abs(radius[i])
+        why[i] = f"the sphere of radius {abs(radius[i]):g} mm ends"
+    for i in range(lens.n_surfaces - 1):
+        meet = _meeting_height_mm(c[i], c[i + 1], lens.thickness_mm[i], min(a[i], a[i + 1]))
+        if meet is None:
+            continue
+        glass = lens.index_after[i] != AIR
+        for j, other in ((i, i + 1), (i + 1, i)):
+            if a[j] > meet:
+                a[j] = meet
+                why[j] = (f"the faces of the element ({lens.row_label(i)} to "
+                          f"{lens.row_label(i + 1)}) meet" if glass else
+                          f"it meets {lens.row_label(other)} across the air gap")
+    if not why:
+        _check_surfaces_do_not_cross(lens)
+        return lens
+    d = lens.aperture_diameter_mm.copy()
+    rows = sorted(why)
+    d[rows] = 2.0 * a[rows]
+    clipped = lens.replace(aperture_diameter_mm=d)
+    _check_surfaces_do_not_cross(clipped)  # before warning: a refused lens gets no notices
+    for j in rows:
+        where = f"{lens.source}:{lens.lines[j]}" if lens.lines and lens.lines[j] else lens.source
+        warnings.warn(LensClipWarning(
+            f"{where}: row {j}: aperture diameter "
+            f"{lens.aperture_diameter_mm[j]:g} mm clipped to {d[j]:.6g} mm, where "
+            f"{why[j]} (the stated diameter is taken as a housing diameter)"), stacklevel=3)
+    return clipped
+
+
+def _meeting_height_mm(c0: float, c1: float, thickness_mm: float,
+                       r_max_mm: float) -> float | None:
+    """Height (mm) in (0, r_max_mm) where a surface of curvature c1, ``thickness_mm``
+    behind one of curvature c0, meets it; None when they do not cross (or cross at
+    the axis, which no clipping mends)."""
+    def gap(r):
+        return thickness_mm + sag_mm(c1, r) - sag_mm(c0, r)
+
+    r = np.linspace(0.0, r_max_mm, _CROSSING_GRID)
+    g = gap(r)
+    if g.min() >= -CROSSING_TOLERANCE_MM:
+        return None
+    k = int(np.argmax(g < 0.0))  # first grid point past the crossing; g[0] = t >= 0
+    lo, hi = float(r[k - 1]), float(r[k])
+    while True:  # bisect to float resolution; gap(lo) >= 0 throughout
+        mid = 0.5 * (lo + hi)
+        if not lo < mid < hi:
+            break
+        if gap(mid) >= 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return lo if lo >= 0.5 * MIN_LENGTH_MM else None
 
 
 def _check_surfaces_do_not_cross(lens: LensPrescription) -> None:
@@ -282,7 +406,7 @@ def _check_surfaces_do_not_cross(lens: LensPrescription) -> None:
     c = lens.curvature_per_mm
     for i in range(lens.n_surfaces - 1):
         rmax = min(lens.aperture_radius_mm[i], lens.aperture_radius_mm[i + 1])
-        r = np.linspace(0.0, rmax, 257)
+        r = np.linspace(0.0, rmax, _CROSSING_GRID)
         gap = lens.thickness_mm[i] + sag_mm(c[i + 1], r) - sag_mm(c[i], r)
         k = int(np.argmin(gap))
         tol = CROSSING_TOLERANCE_MM
@@ -313,14 +437,5 @@ def format_lens(lens: LensPrescription) -> str:
 
 
 def write_lens(lens: LensPrescription, path: str | os.PathLike) -> None:
-    """Write ``lens`` to ``path`` atomically (temporary file, then rename)."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="\n") as f:
-            f.write(format_lens(lens))
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Write ``lens`` to ``path`` (:func:`format_lens`, LF line ends), atomically."""
+    write_bytes(path, format_lens(lens).encode("utf-8"))

@@ -1,13 +1,13 @@
 """Reference real-ray tracer: one ray at a time, written for clarity, not speed.
 
-This module exists to check :mod:`povlens.tracer` (the fast, vectorized tracer).
+This module exists to check :mod:`povlens.lens.tracer` (the fast, vectorized tracer).
 It shares no tracing code with it and uses a different derivation, so that a
-mistake in either shows up as a disagreement (see :mod:`povlens.check`).
+mistake in either shows up as a disagreement (see :mod:`povlens.lens.check`).
 Everything per ray is plain Python ``float`` arithmetic with :mod:`math`.
 
 Frames and units
 ----------------
-Camera frame of :mod:`povlens.frames`: millimetres, film at z = 0, +z toward the
+Camera frame of :mod:`povlens.lens.frames`: millimetres, film at z = 0, +z toward the
 scene, rear vertex at ``z = film_distance_mm``.  Inside the loop each surface i
 uses its local sag coordinates (x, y, s) with ``s = vertex_z_mm[i] - z`` (s grows
 toward the film) and the ray direction ``(dx, dy, ds)`` with ``ds = -dz``.
@@ -48,7 +48,7 @@ tangential direction scaled by ``mu = n1/n2``: ``d' = mu d_t + cos_t N`` with
 ``cos_t = sqrt(1 - mu^2 |d_t|^2)``.  ``mu^2 |d_t|^2 > 1`` is total internal
 reflection.
 
-Blocking rules (identical to :mod:`povlens.tracer`)
+Blocking rules (identical to :mod:`povlens.lens.tracer`)
 ---------------------------------------------------
 A ray is blocked at surface i (``blocked_at = i``) when, at that surface,
 
@@ -64,7 +64,7 @@ A ray is blocked at surface i (``blocked_at = i``) when, at that surface,
 An input ray with zero or non-finite direction or non-finite origin is blocked at
 the first surface it would meet ("invalid-ray").
 
-Borderline bookkeeping (used by :mod:`povlens.check`)
+Borderline bookkeeping (used by :mod:`povlens.lens.check`)
 -----------------------------------------------------
 Each traced ray also reports ``edge_margin``, the smallest ``|r_hit - r_i| / r_i``
 over the surfaces it met (including the one that blocked it, when a hit point was

@@ -1,6 +1,6 @@
 """Exact real-ray tracing through a lens system, vectorized over rays.
 
-Frames are those of :mod:`povlens.frames` (camera frame, mm, +z toward the scene).
+Frames are those of :mod:`povlens.lens.frames` (camera frame, mm, +z toward the scene).
 
 Algorithm (per surface, all rays at once)
 -----------------------------------------

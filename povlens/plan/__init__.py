@@ -1,0 +1,11 @@
+"""Planning: from a scene and a lens to a render folder's plan.
+
+Modules, lowest first: ``options`` (what a conversion is asked for), ``schema`` (the
+plan's typed records, :func:`~povlens.plan.schema.read_plan` /
+:func:`~povlens.plan.schema.write_plan`), ``depth_probe`` (scene distances by a POV-Ray
+light that fades with distance), ``fixed`` (the plan of a given method), ``autofocus``
+(the focus distance from the scene), ``decision`` (``--method auto``'s pure
+choice), ``adaptive`` (row bands of adaptive mesh sampling), ``auto`` (probe, measure,
+decide), ``render_folder`` (plan.json, wrappers, Makefile), ``speculative`` (what
+``povlens render`` starts before the decision), ``convert`` (the entry point).
+"""

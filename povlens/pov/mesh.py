@@ -1,41 +1,39 @@
 """POV-Ray ``mesh_camera`` emission: ray meshes and wrapper scenes.
 
 A lens sample is handed to POV-Ray as a ``mesh2`` with exactly one face per
-pixel (``mesh_camera`` distribution 0, reference §2).  Face ``k = j*W + i``
-(row ``j`` from the top, column ``i`` from the left) produces the primary ray
-of pixel (i, j):
+pixel (``mesh_camera`` distribution 0).  Face ``k = j*W + i`` (row ``j`` from the
+top, column ``i`` from the left) produces the primary ray of pixel (i, j)
+(POV-Ray 3.7.0.10 source, ``CreateCameraRay`` in ``source/backend/render/tracepixel.cpp``):
 
 * origin = the face centroid (POV-Ray computes it from float32 vertices);
 * direction = ``normalize(cross(P3 - P1, P2 - P1))`` -- the *opposite* of the
-  usual right-hand-rule normal (§2.4).
+  usual right-hand-rule normal.
 
-Faces are equilateral triangles of circumradius ``s`` built as in §2.5.
-Vertices are written relative to a local origin ``T`` and the mesh is moved into
-place with ``mesh { NAME translate T }`` inside the camera, which POV-Ray applies
-in double precision (§2.6, §4).  They are written as integers on a grid of
-q = 2^e scene units, the finest with every ray vertex below 2^:data:`VERTEX_BITS`
-steps, and the mesh2 ends in ``scale q``: POV-Ray holds each parsed integer as a
-float32 (exact up to 2^24, rounded above, as any float32), applies the power-of-two
-scale exactly in double with the translation, and normalises the face normal.
-Integers format three times faster than ``%.9g`` and make a smaller file: at
-160x120 (paper.pov, cooke.triplet.50mm) a sample's mesh went from 2.72 to 2.03 MB,
-writing it from 76-97 to 50 ms and POV-Ray's CPU time per sample from 0.10 to
-0.088 s.  Accuracy (the same sample, against the float64 rays): direction error
-max 3.0e-8, RMS 1.1e-8 rad, origin error across the ray max 4.7e-8 units; the
-float32 ``%.9g`` vertices of before gave 2.3e-8, 5.7e-9 and 3.5e-8, and the
-reference's expectation for mesh2 is about 1e-7 (§4).  The sink triangle, far
+Faces are equilateral triangles of circumradius ``s`` whose centroid is the ray's
+origin and whose normal is its direction (:func:`_face_vertices`).  Vertices are
+written relative to a local origin ``T`` and the mesh is moved into place with
+``mesh { NAME translate T }`` inside the camera, which POV-Ray applies in double
+precision.  They are written as integers on a grid of q = 2^e scene units, the
+finest with every ray vertex below 2^:data:`VERTEX_BITS` steps, and the mesh2 ends
+in ``scale q``: POV-Ray holds each parsed integer as a float32 (exact up to 2^24),
+applies the power-of-two scale exactly, and normalises the face normal.  Integers
+are faster to write and smaller than ``%.9g`` floats at the same accuracy (direction
+error about 3e-8 rad; numbers in docs/decisions/pov.md).  The sink triangle, far
 from ``T``, is written with ``%.9g`` in grid units.
 
 Rays the lens blocks (vignetting) start inside a small black *sink* sphere
-far from the scene (§2.8), so they count as black in POV-Ray's
-rays-per-pixel mean.
+far from the scene, so they count as black in POV-Ray's rays-per-pixel mean.
 
 POV-Ray 3.7.0.x repeats the first face row (FS#254); :func:`render_size`
 returns the ``W x (H+1)`` size to render and the number of top rows to drop.
 
 All coordinates are POV-Ray world coordinates (left-handed, +y up) in scene
 units.  The wrapper templates live in ``templates/`` at the top of the
-repository.
+repository.  They keep the scene's ``#version``: none before the scene, and 3.7
+only around povlens's own statements of a scene that ended below 3.7, restored
+after them, since POV-Ray takes gamma handling, ambient under radiosity and the
+noise generator from the version at the end of parsing (the templates' comments;
+docs/decisions/pov.md).
 """
 
 from __future__ import annotations
@@ -43,14 +41,13 @@ from __future__ import annotations
 import math
 import os
 import re
-import string
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from povlens.errors import PovlensError, UsageError
-from povlens.pov.process import needs_row_workaround, povray_version
+from povlens.pov.executable import needs_row_workaround, povray_version
+from povlens.pov.sdl_text import TEMPLATE_DIR, pov_string, pov_vector, read_template
 from povlens.util.files import write_text
 
 __all__ = [
@@ -64,9 +61,6 @@ __all__ = [
     "focal_blur_wrapper",
     "pinhole_wrapper",
 ]
-
-#: Folder holding ``mesh_wrapper.pov.tmpl`` and ``focal_blur_wrapper.pov.tmpl``.
-TEMPLATE_DIR = Path(__file__).resolve().parents[2] / "templates"
 
 #: Radius of the black sink sphere (scene units).  Generous compared with the
 #: float32 rounding of a face centroid 1e5 units from the local origin (~8e-3).
@@ -109,32 +103,12 @@ def default_sink_centre(location: Sequence[float], forward: Sequence[float]) -> 
     return np.asarray(location, dtype=np.float64) - SINK_DISTANCE * f / np.linalg.norm(f)
 
 
-# ---------------------------------------------------------------------------
-# formatting helpers
-
-
-def _vec(v: Sequence[float]) -> str:
-    """A POV-Ray vector literal with full double precision."""
-    a = np.asarray(v, dtype=np.float64).reshape(3)
-    if not np.all(np.isfinite(a)):
-        raise PovlensError(f"cannot write the vector {a.tolist()} to POV-Ray: it is not finite")
-    return "<%.17g, %.17g, %.17g>" % tuple(a.tolist())
-
-
-def _pov_string(s: str | os.PathLike) -> str:
-    """A POV-Ray string literal (for #include file names)."""
-    s = os.fspath(s)
-    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-
 def _check_name(name: str) -> None:
     if not _IDENT.match(name):
         raise UsageError(
             f"bad POV-Ray identifier {name!r} for a mesh",
             "use letters, digits and '_', starting with a letter",
         )
-
-
 
 
 # ---------------------------------------------------------------------------
@@ -153,6 +127,10 @@ def write_ray_mesh(
 ) -> np.ndarray:
     """Write ``#declare name = mesh2 {...}`` encoding one primary ray per pixel.
 
+    Parameters
+    ----------
+    path : the ``.inc`` file to write (atomically).
+    name : the POV-Ray identifier to declare.
     origin : (H, W, 3) float64, ray origins in POV-Ray world coordinates
         (scene units); row 0 is the top of the image.
     direction : (H, W, 3) float64, ray directions (any positive length).
@@ -160,18 +138,49 @@ def write_ray_mesh(
         black sink sphere at ``sink_centre`` ((3,), scene units), so the
         pixel's sample is black.
     circumradius : triangle size ``s`` in scene units (0.5..5 keeps float32
-        direction errors near 1e-7, reference §4).
+        direction errors near 1e-7).
 
-    The mesh has exactly ``H*W`` faces in row-major order.  Blocked faces
-    share three vertices.  The file is written atomically.
+    Returns
+    -------
+    np.ndarray
+        ``T``, shape (3,), scene units: the mesh is written relative to ``T`` and must
+        be used as ``mesh { name translate T }`` (see :func:`mesh_camera_block`).
 
-    Returns ``T``, shape (3,): the mesh is written relative to ``T`` and must
-    be used as ``mesh { name translate T }`` (see :func:`mesh_camera_block`).
+    Raises
+    ------
+    PovlensError
+        For inconsistent shapes, non-finite valid rays, or rays that float32
+        vertices cannot represent (degenerate faces).
 
-    Raises :class:`PovlensError` for inconsistent shapes, non-finite valid
-    rays, or rays that float32 vertices cannot represent (degenerate faces).
+    Notes
+    -----
+    The mesh has exactly ``H*W`` faces in row-major order.  Blocked faces share three
+    vertices.
     """
     _check_name(name)
+    o, d, ok = _ray_arrays(name, origin, direction, valid)
+    s = float(circumradius)
+    if not (s > 0 and math.isfinite(s)):
+        raise UsageError(f"ray mesh {name}: circumradius must be > 0, got {circumradius}")
+    sink = np.asarray(sink_centre, dtype=np.float64).reshape(3)
+    h, w = ok.shape
+    o, d, ok, norm = _flat_rays(name, o, d, ok)
+    idx = np.flatnonzero(ok)
+    ov = o[idx]
+    dv = d[idx] / norm[idx, None]
+    t = _local_origin(ov, sink)
+    ray_verts = _face_vertices(ov - t, dv, s)
+    sink_tri = _sink_triangle(sink - t, s)
+    q, ray_int, sink32 = _vertex_grid(name, ray_verts, sink_tri, s)
+    _check_float32_faces(name, ray_int, sink32, q, dv, ov, s)
+    faces = _face_indices(len(ok), idx)
+    write_text(path, _mesh2_text(name, w, h, ray_int, sink32, faces, q, sink, t))
+    return t
+
+
+def _ray_arrays(name: str, origin, direction, valid):
+    """``origin``, ``direction`` (H, W, 3) float64 and ``valid`` (H, W) bool, or
+    :class:`PovlensError` for inconsistent shapes."""
     o = np.asarray(origin, dtype=np.float64)
     d = np.asarray(direction, dtype=np.float64)
     ok = np.asarray(valid, dtype=bool)
@@ -180,15 +189,17 @@ def write_ray_mesh(
             f"ray mesh {name}: expected origin and direction of shape (H, W, 3) and valid of "
             f"shape (H, W); got {o.shape}, {d.shape}, {ok.shape}"
         )
-    s = float(circumradius)
-    if not (s > 0 and math.isfinite(s)):
-        raise UsageError(f"ray mesh {name}: circumradius must be > 0, got {circumradius}")
-    sink = np.asarray(sink_centre, dtype=np.float64).reshape(3)
+    return o, d, ok
+
+
+def _flat_rays(name: str, o: np.ndarray, d: np.ndarray, ok: np.ndarray):
+    """The rays in row-major pixel order: origins (n, 3), directions (n, 3), valid (n,)
+    and direction lengths (n,); :class:`PovlensError` for no pixels or a valid ray
+    that is not finite."""
     h, w = ok.shape
     n = h * w
     if n == 0:
         raise PovlensError(f"ray mesh {name}: the image has no pixels")
-
     o = o.reshape(n, 3)
     d = d.reshape(n, 3)
     ok = ok.reshape(n)
@@ -200,37 +211,45 @@ def write_ray_mesh(
             f"ray mesh {name}: {int(bad.sum())} valid ray(s) have a non-finite origin or a "
             f"zero/non-finite direction (first at row {k // w}, column {k % w})"
         )
-    idx = np.flatnonzero(ok)
-    ov = o[idx]
-    dv = d[idx] / norm[idx, None]
+    return o, d, ok, norm
 
-    # Local origin: centre of the valid origins' bounding box.
-    if len(idx):
-        t = 0.5 * (ov.min(axis=0) + ov.max(axis=0))
-    else:
-        t = sink.copy()
 
-    # Orthonormal a, b with cross(a, b) = d, per face (reference §2.5).
+def _local_origin(ov: np.ndarray, sink: np.ndarray) -> np.ndarray:
+    """The mesh's local origin ``T`` (3,): the centre of the valid origins' bounding
+    box (the sink centre if every ray is blocked)."""
+    if len(ov):
+        return 0.5 * (ov.min(axis=0) + ov.max(axis=0))
+    return sink.copy()
+
+
+def _face_vertices(rel: np.ndarray, dv: np.ndarray, s: float) -> np.ndarray:
+    """Vertices (3m, 3) of the faces whose centroids are ``rel`` (m, 3) and whose
+    POV-Ray normals ``cross(P3 - P1, P2 - P1)`` point along the unit ``dv`` (m, 3):
+    ``P1 = o + s a``, ``P2,3 = o + s(-a/2 -+ (sqrt(3)/2) b)`` with orthonormal a, b,
+    ``cross(a, b) = d``."""
     helper = np.where(np.abs(dv[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     a = np.cross(helper, dv)
     a /= np.linalg.norm(a, axis=1, keepdims=True)
     b = np.cross(dv, a)
-    rel = ov - t
     p1 = rel + s * a
     p2 = rel + s * (-0.5 * a - _SQRT3_2 * b)
     p3 = rel + s * (-0.5 * a + _SQRT3_2 * b)
+    return np.stack([p1, p2, p3], axis=1).reshape(-1, 3)
 
-    # The sink face (shared by every blocked pixel); its direction is
-    # irrelevant, so it lies across the two smallest coordinates of the sink,
-    # where float32 keeps the most precision.
-    sr = sink - t
+
+def _sink_triangle(sr: np.ndarray, s: float) -> np.ndarray:
+    """The face (3, 3) every blocked pixel shares, centred on the sink ``sr`` (relative
+    to ``T``).  Its direction is irrelevant, so it lies across the two smallest
+    coordinates of the sink, where float32 keeps the most precision."""
     ia, ib = np.argsort(np.abs(sr))[:2]
     ea, eb = np.eye(3)[ia], np.eye(3)[ib]
-    sink_tri = np.array([sr + s * ea, sr + s * (-0.5 * ea - _SQRT3_2 * eb), sr + s * (-0.5 * ea + _SQRT3_2 * eb)])
+    return np.array([sr + s * ea, sr + s * (-0.5 * ea - _SQRT3_2 * eb),
+                     sr + s * (-0.5 * ea + _SQRT3_2 * eb)])
 
-    # Integer vertices on a grid of q = 2^e scene units (``scale q`` in the mesh2):
-    # ray vertices stay below 2^VERTEX_BITS grid steps (see the module docstring).
-    ray_verts = np.stack([p1, p2, p3], axis=1).reshape(-1, 3)
+
+def _vertex_grid(name: str, ray_verts: np.ndarray, sink_tri: np.ndarray, s: float):
+    """The grid step ``q`` (scene units, a power of two), the ray vertices as integer
+    grid steps (3m, 3) and the sink triangle in grid units as float32 (3, 3)."""
     span = max(float(np.abs(ray_verts).max()) if len(ray_verts) else 0.0, s)
     q = math.ldexp(1.0, math.ceil(math.log2(span)) - VERTEX_BITS)
     ray_int = np.rint(ray_verts / q).astype(np.int64)
@@ -243,10 +262,15 @@ def write_ray_mesh(
             "for POV-Ray's float32 mesh vertices",
             "keep the sink centre within about 1e6 scene units of the camera",
         )
+    return q, ray_int, sink32
+
+
+def _check_float32_faces(name: str, ray_int: np.ndarray, sink32: np.ndarray, q: float,
+                         dv: np.ndarray, ov: np.ndarray, s: float) -> None:
+    """Check what POV-Ray will compute from the float32 vertices: no degenerate face,
+    ray directions within 1e-4 rad of ``dv``."""
     # what POV-Ray holds: float32 of each parsed value, times q (exact: a power of two)
     verts = np.concatenate([ray_int.astype(np.float32), sink32]).astype(np.float64) * q
-
-    # Check what POV-Ray will compute from the float32 vertices (§2.3, §2.4).
     tri = verts.reshape(-1, 3, 3)
     normal = np.cross(tri[:, 2] - tri[:, 0], tri[:, 1] - tri[:, 0])
     area2 = np.linalg.norm(normal, axis=1)
@@ -258,7 +282,7 @@ def write_ray_mesh(
             f"with triangles of size {s:g})",
             "use a larger circumradius or move the sink centre closer to the camera",
         )
-    if len(idx):
+    if len(dv):
         ndir = normal[:-1] / area2[:-1, None]
         err = np.linalg.norm(ndir - dv, axis=1).max()
         if err > 1e-4:
@@ -268,29 +292,38 @@ def write_ray_mesh(
                 "use a larger circumradius",
             )
 
-    # Face indices: valid face m -> vertices 3m..3m+2, blocked -> the sink triangle.
+
+def _face_indices(n: int, idx: np.ndarray) -> np.ndarray:
+    """Vertex indices (n, 3) of the n faces: valid face m -> vertices 3m..3m+2,
+    blocked faces -> the sink triangle written after them."""
     nv = 3 * len(idx)
     faces = np.empty((n, 3), dtype=np.int64)
     faces[:] = np.arange(nv, nv + 3)
     faces[idx] = 3 * np.arange(len(idx))[:, None] + np.arange(3)
+    return faces
 
-    rows = ["<%d,%d,%d>,<%d,%d,%d>,<%d,%d,%d>,\n"] * len(idx)
+
+def _mesh2_text(name: str, w: int, h: int, ray_int: np.ndarray, sink32: np.ndarray,
+                faces: np.ndarray, q: float, sink: np.ndarray, t: np.ndarray) -> str:
+    """The ``#declare name = mesh2 {...}`` text: integer ray vertices, the sink
+    triangle, the faces, ``scale q``."""
+    n_valid = len(ray_int) // 3
+    n = len(faces)
+    rows = ["<%d,%d,%d>,<%d,%d,%d>,<%d,%d,%d>,\n"] * n_valid
     vtext = "".join(rows) % tuple(ray_int.reshape(-1).tolist())
     vtext += "<%.9g,%.9g,%.9g>,<%.9g,%.9g,%.9g>,<%.9g,%.9g,%.9g>" % tuple(
         sink32.astype(np.float64).reshape(-1).tolist())
     ftext = ",\n".join(["<%d,%d,%d>"] * n) % tuple(faces.reshape(-1).tolist())
-    text = (
+    return (
         f"// povlens ray mesh: {w} x {h} pixels, {n} faces in row-major order (row 0 = top);\n"
-        f"// {n - len(idx)} blocked rays start in the sink sphere at {_vec(sink)}.\n"
-        f"// Vertices in steps of {q:.17g} units (scale); use as: mesh {{ {name} translate {_vec(t)} }}\n"
+        f"// {n - n_valid} blocked rays start in the sink sphere at {pov_vector(sink)}.\n"
+        f"// Vertices in steps of {q:.17g} units (scale); use as: mesh {{ {name} translate {pov_vector(t)} }}\n"
         f"#declare {name} = mesh2 {{\n"
-        f"vertex_vectors {{ {nv + 3},\n{vtext}\n}}\n"
+        f"vertex_vectors {{ {3 * n_valid + 3},\n{vtext}\n}}\n"
         f"face_indices {{ {n},\n{ftext}\n}}\n"
         f"scale {q:.17g}\n"
         f"}}\n"
     )
-    write_text(path, text)
-    return t
 
 
 # ---------------------------------------------------------------------------
@@ -326,19 +359,8 @@ def mesh_camera_block(
         tr = np.broadcast_to(tr, (len(names), 3))
     if tr.shape != (len(names), 3):
         raise UsageError(f"translate must have shape (3,) or ({len(names)}, 3), got {tr.shape}")
-    meshes = "\n".join(f"    mesh {{ {nm} translate {_vec(t)} }}" for nm, t in zip(names, tr))
+    meshes = "\n".join(f"    mesh {{ {nm} translate {pov_vector(t)} }}" for nm, t in zip(names, tr))
     return f"camera {{\n  mesh_camera {{\n    {rpp} 0\n{meshes}\n  }}\n}}\n"
-
-
-def _template(name: str) -> string.Template:
-    path = TEMPLATE_DIR / name
-    try:
-        return string.Template(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise PovlensError(
-            f"cannot read the povlens template {path}: {exc.strerror or exc}",
-            "reinstall povlens from its source tree (the templates folder is missing)",
-        ) from None
 
 
 def _gamma_block(assumed_gamma: float | None) -> str:
@@ -363,18 +385,19 @@ def mesh_wrapper(
     ``scene_include`` and ``mesh_includes`` are file names as POV-Ray should
     see them from its working directory (the wrapper's folder): keep them
     relative where possible and pass the scene's folder to
-    :func:`povlens.povray.render` as a library path.  ``assumed_gamma`` (e.g.
-    1.0) is set *before* the scene, overriding the scene's own (reference §6);
+    :func:`povlens.pov.process.render` as a library path.  ``assumed_gamma`` (e.g.
+    1.0) is set *before* the scene, overriding the scene's own (POV-Ray keeps the
+    first ``assumed_gamma`` it reads; docs/decisions/pov.md);
     ``None`` keeps the scene's.  The sink sphere (centre ``sink_centre``,
     radius ``sink_radius``, scene units) is black, casts no shadow and is not
-    reflected.
+    reflected.  The scene keeps its own ``#version`` (module docstring).
     """
     camera = mesh_camera_block(mesh_names, translate, rays_per_pixel)
-    includes = "\n".join(f"#include {_pov_string(p)}" for p in mesh_includes)
-    return _template("mesh_wrapper.pov.tmpl").substitute(
+    includes = "\n".join(f"#include {pov_string(p)}" for p in mesh_includes)
+    return read_template("mesh_wrapper.pov.tmpl").substitute(
         global_settings=_gamma_block(assumed_gamma),
-        scene_include=_pov_string(scene_include),
-        sink_centre=_vec(sink_centre),
+        scene_include=pov_string(scene_include),
+        sink_centre=pov_vector(sink_centre),
         sink_radius="%.9g" % float(sink_radius),
         mesh_includes=includes,
         camera=camera,
@@ -390,13 +413,13 @@ def _perspective(
     up,
     assumed_gamma,
 ) -> str:
-    return _template("focal_blur_wrapper.pov.tmpl").substitute(
+    return read_template("focal_blur_wrapper.pov.tmpl").substitute(
         global_settings=_gamma_block(assumed_gamma),
-        scene_include=_pov_string(scene_include),
-        location=_vec(location),
-        direction=_vec(direction),
-        right=_vec(right),
-        up=_vec(up),
+        scene_include=pov_string(scene_include),
+        location=pov_vector(location),
+        direction=pov_vector(direction),
+        right=pov_vector(right),
+        up=pov_vector(up),
         **template_vars,
     )
 
@@ -421,7 +444,8 @@ def focal_blur_wrapper(
     ``location`` (3,), ``direction``/``right``/``up`` (3,) are world vectors
     (scene units) used verbatim: pixel (i, j) looks along ``D + x0 R + y0 U``.
     ``aperture`` is POV-Ray's value, i.e. **twice** the lens diameter
-    (reference §7.4); the focal plane is perpendicular to ``direction`` at
+    (``TraceRayWithFocalBlur`` in POV-Ray 3.7's ``tracepixel.cpp`` offsets rays by
+    ``aperture/2`` times a point of a disc of radius 0.5); the focal plane is perpendicular to ``direction`` at
     ``focal_distance``; ``blur_samples N, N`` fixes N samples per pixel.
     With ``max_blur_samples`` M > N, POV-Ray samples adaptively: at least N,
     then more until its ``confidence`` / ``variance`` test passes or M are shot
@@ -444,7 +468,7 @@ def focal_blur_wrapper(
     fp = np.asarray(location, dtype=np.float64) + fdist * d / np.linalg.norm(d)
     blur = (
         f"  aperture {aperture:.17g}\n"
-        f"  focal_point {_vec(fp)}\n"
+        f"  focal_point {pov_vector(fp)}\n"
         f"  blur_samples {n}, {m}\n"
         + (f"  confidence {float(confidence):.9g}\n" if confidence is not None else "")
         + (f"  variance {float(variance):.9g}\n" if variance is not None else "")
@@ -463,6 +487,8 @@ def pinhole_wrapper(
 ) -> str:
     """Wrapper ``.pov`` text: the scene through a pinhole perspective camera.
 
-    Same vectors as :func:`focal_blur_wrapper`, without focal blur.
+    Same vectors as :func:`focal_blur_wrapper`, without focal blur.  The scene keeps
+    its own ``#version`` (module docstring); text appended to the wrapper is read
+    under the scene's version.
     """
     return _perspective({"blur": ""}, scene_include, location, direction, right, up, assumed_gamma)

@@ -1,7 +1,8 @@
-"""Running POV-Ray: finding the executable, its version, and one render.
+"""Running POV-Ray: its command line, its processes, and renders.
 
-Everything here follows the measured behaviour of POV-Ray 3.7.0.10 described
-in ``/work/shared/reference/povray-mesh-camera.md`` (§10):
+This is the one place that builds a POV-Ray command line (:func:`render_switches`,
+:func:`povray_command`) and starts a POV-Ray process (:func:`start_povray`).  It
+relies on this behaviour of POV-Ray 3.7.0.10 (the record is in docs/decisions/pov.md):
 
 * ``-D`` is required (Debian's ``povray.ini`` sets ``Display=On``);
   ``-V -GR -GS`` leave only warnings and errors on stderr (plus a banner);
@@ -14,7 +15,7 @@ in ``/work/shared/reference/povray-mesh-camera.md`` (§10):
   writes it into the image's folder and refuses any name with a folder part
   ("Stream output files must reside in same directory as image output file");
 * ``+SR``/``+ER``/``+SC``/``+EC`` values in (0, 1] are fractions of the image,
-  so "+ER1" means the whole height; :func:`render` takes 0-based pixel
+  so "+ER1" means the whole height; :func:`pixel_range_args` takes 0-based pixel
   ranges and writes them unambiguously;
 * POV-Ray resolves ``#include`` and image-map file names relative to its
   working directory and its library paths (``+L``), *not* relative to the
@@ -22,8 +23,9 @@ in ``/work/shared/reference/povray-mesh-camera.md`` (§10):
   the ``.pov`` file; pass the folders of included scenes as
   ``library_paths``.
 
-The executable is ``$POVLENS_POVRAY`` if that is set, else ``povray`` on
-``PATH``.
+The executable and its version come from :mod:`povlens.pov.executable`; the
+user's own POV-Ray options (library paths, clock, passthrough) from
+:mod:`povlens.pov.povray_options`.
 """
 
 from __future__ import annotations
@@ -31,9 +33,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import io
-import json
 import os
-import re
 import shlex
 import shutil
 import subprocess
@@ -41,216 +41,72 @@ import tempfile
 import time
 import uuid
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import IO, Iterable, Sequence
 
 from povlens.errors import PovrayError, UsageError
+from povlens.pov.executable import ENV_VAR, find_povray
+from povlens.pov.povray_options import PovrayOptions, as_povray_options
+from povlens.pov.povray_output import povray_error_text
 from povlens.util.files import atomic_output
 
 __all__ = [
-    "ENV_VAR",
-    "find_povray",
-    "povray_version",
-    "needs_row_workaround",
+    "pixel_range_args",
+    "render_switches",
+    "povray_command",
+    "priority_tools",
+    "start_povray",
+    "FIRST_OUTPUT_S",
+    "output_written",
+    "povray_finished",
     "render",
     "start_render",
     "RenderJob",
-    "output_written",
 ]
-
-#: Environment variable that overrides which POV-Ray executable is used.
-ENV_VAR = "POVLENS_POVRAY"
 
 #: Output file suffix -> POV-Ray output-format switch.
 _FORMATS = {".exr": "+FE", ".png": "+FN", ".hdr": "+FH", ".tga": "+FT", ".ppm": "+FP"}
 
-#: Lines of POV-Ray's start-up banner and progress output that carry no
-#: information about a failure.
-_NOISE = re.compile(
-    r"^(povray: cannot open the user configuration file|==== \[|POV-Ray finished)"
-)
-
 
 # ---------------------------------------------------------------------------
+# the command line
+
+#: Switches of every run: no display window, only warnings and errors on stderr.
+_QUIET = ("-D", "-V", "-GR", "-GS")
+
+#: Start and end switches of a pixel range, and the name of its axis in messages.
+_RANGE_SWITCHES = {"row": ("+SR", "+ER"), "col": ("+SC", "+EC")}
 
 
-# ---------------------------------------------------------------------------
-# the executable and its version
+def pixel_range_args(start: int | None, end: int | None, size: int, axis: str = "row") -> list[str]:
+    """POV-Ray's ``+SR``/``+ER`` (``axis="row"``) or ``+SC``/``+EC`` (``"col"``)
+    switches for the 0-based half-open pixel range [start, end).
 
+    Parameters
+    ----------
+    start, end : pixels of the rendered image, 0 = top row / left column; None for
+        the image's edge.
+    size : the rendered image's height (rows) or width (columns), pixels.
+    axis : ``"row"`` or ``"col"``.
 
-def find_povray() -> str:
-    """Absolute path of the POV-Ray executable, or :class:`PovrayError`.
+    Returns
+    -------
+    list of str
+        No switch for a full range.  POV-Ray counts from 1 and reads values in (0, 1]
+        as fractions of the image, so "+ER1" would mean the whole image: an end of 1
+        is written as the fraction 1.5/size, which POV-Ray truncates to row 1.
 
-    ``$POVLENS_POVRAY`` (a path or a command name) overrides ``povray`` on PATH.
+    Raises
+    ------
+    UsageError
+        Unless 0 <= start < end <= size.
     """
-    override = os.environ.get(ENV_VAR)
-    if override:
-        found = shutil.which(override)
-        if found is None:
-            raise PovrayError(
-                f"{ENV_VAR}={override!r} is not an executable POV-Ray program",
-                f"point {ENV_VAR} to the povray executable, or unset it to use "
-                "'povray' from PATH",
-            )
-        return os.path.abspath(found)
-    found = shutil.which("povray")
-    if found is None:
-        raise PovrayError(
-            "POV-Ray (the 'povray' program) was not found on PATH",
-            "install it (Debian/Ubuntu: apt-get install povray) or set "
-            f"{ENV_VAR} to the povray executable",
-        )
-    return os.path.abspath(found)
-
-
-def _version_cache_path() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "povlens" / "povray-version.json"
-
-
-def _binary_key(executable: str) -> str | None:
-    """Identity of an executable file for the version cache: its real path, inode,
-    size and modification time.  None for scripts (a wrapper's POV-Ray may change
-    while the wrapper does not) and for what cannot be read."""
-    try:
-        real = os.path.realpath(executable)
-        with open(real, "rb") as f:
-            if f.read(4) != b"\x7fELF":
-                return None
-        st = os.stat(real)
-    except OSError:
-        return None
-    return f"{real}:{st.st_ino}:{st.st_size}:{st.st_mtime_ns}"
-
-
-@functools.lru_cache(maxsize=None)
-def _version_of(executable: str) -> str:
-    """POV-Ray's version, remembered across runs in the user's cache folder
-    (``$XDG_CACHE_HOME/povlens/povray-version.json``): ``povray --version`` takes
-    ~0.2 s, mostly idle start-up, on every conversion otherwise.  The entry is
-    keyed by the binary's path, inode, size and mtime, so an upgrade asks again."""
-    key = _binary_key(executable)
-    cache = _version_cache_path()
-    known: dict = {}
-    if key is not None:
-        try:
-            known = json.loads(cache.read_text())
-            if isinstance(known.get(key), str):
-                return known[key]
-        except (OSError, ValueError, AttributeError):
-            known = {}
-    version = _ask_version(executable)
-    if key is not None:
-        try:
-            cache.parent.mkdir(parents=True, exist_ok=True)
-            tmp = cache.with_name(f".{cache.name}.{os.getpid()}")
-            tmp.write_text(json.dumps({**(known if isinstance(known, dict) else {}),
-                                       key: version}) + "\n")
-            os.replace(tmp, cache)
-        except OSError:
-            pass                     # no cache folder: ask again next time
-    return version
-
-
-def _ask_version(executable: str) -> str:
-    try:
-        proc = subprocess.run(
-            [executable, "--version"],
-            stdin=subprocess.DEVNULL,
-            capture_output=True,
-            text=True,
-            errors="replace",
-            timeout=60,
-        )
-    except OSError as exc:
-        raise PovrayError(
-            f"cannot run POV-Ray at {executable}: {exc.strerror or exc}",
-            f"check the installation or set {ENV_VAR} to a working povray",
-        ) from None
-    except subprocess.TimeoutExpired:
-        raise PovrayError(
-            f"'{executable} --version' did not finish within 60 s",
-            f"check the installation or set {ENV_VAR} to a working povray",
-        ) from None
-    text = proc.stdout + "\n" + proc.stderr
-    m = re.search(r"POV-Ray\s+(?:v(?:ersion)?\s*)?(\d+(?:\.\d+)+)", text)
-    if m is None:
-        raise PovrayError(
-            f"'{executable} --version' did not report a POV-Ray version; it printed:\n"
-            + _tail(text),
-            f"set {ENV_VAR} to the povray executable",
-        )
-    return m.group(1)
-
-
-def povray_version(executable: str | None = None) -> str:
-    """POV-Ray's version number, e.g. ``"3.7.0.10"`` (cached per executable)."""
-    return _version_of(executable or find_povray())
-
-
-def needs_row_workaround(version: str) -> bool:
-    """True for POV-Ray 3.7.0.x, whose mesh_camera repeats the first face row.
-
-    (FS#254, fixed in 3.7.1/3.8.)  Such versions need a ``W x (H+1)`` render
-    whose top output row is dropped; see :func:`povlens.mesh_camera.render_size`.
-    """
-    parts = version.split(".")
-    return parts[:3] == ["3", "7", "0"]
-
-
-# ---------------------------------------------------------------------------
-# rendering
-
-
-def _tail(text: str, lines: int = 25) -> str:
-    kept = [ln for ln in text.splitlines() if ln.strip()]
-    return "\n".join(kept[-lines:])
-
-
-def _strip_banner(lines: list[str]) -> list[str]:
-    """Drop POV-Ray's start-up banner (everything up to the library list)."""
-    start = next((i for i, ln in enumerate(lines) if ln.startswith("==== [")), None)
-    if start is not None:
-        return lines[start:]
-    hdr = next((i for i, ln in enumerate(lines) if ln.startswith("Support libraries used by")), None)
-    if hdr is None:
-        return lines
-    i = hdr + 1
-    while i < len(lines) and (lines[i].startswith(" ") or not lines[i].strip()):
-        i += 1
-    return lines[i:]
-
-
-def _error_text(stderr: str, log_text: str) -> str:
-    """POV-Ray's own description of a failure, without the start-up banner."""
-    body = _strip_banner(stderr.splitlines())
-    body = [ln for ln in body if ln.strip() and not _NOISE.match(ln)]
-    parts = []
-    if log_text.strip():
-        parts.append(log_text.strip())
-    if body:
-        stderr_text = "\n".join(dict.fromkeys(body[-25:]))  # drop repeated lines
-        if stderr_text not in log_text:
-            parts.append(stderr_text)
-    if not parts:
-        parts.append(_tail(stderr) or "(POV-Ray printed nothing)")
-    return "\n".join(parts)
-
-
-def _span_args(
-    start: int | None, end: int | None, size: int, start_flag: str, end_flag: str, what: str
-) -> list[str]:
-    """POV-Ray +S?/+E? switches for the 0-based half-open span [start, end).
-
-    POV-Ray counts from 1 and reads values in (0, 1] as fractions of the
-    image, so "+ER1" would mean the whole image; an end of 1 is therefore
-    written as the fraction 1.5/size, which POV-Ray truncates to row 1.
-    """
+    start_flag, end_flag = _RANGE_SWITCHES[axis]
     s = 0 if start is None else int(start)
     e = size if end is None else int(end)
     if not (0 <= s < e <= size):
         raise UsageError(
-            f"bad {what} range [{start}, {end}) for an image {size} pixels wide/high",
-            f"use 0 <= start_{what} < end_{what} <= {size}",
+            f"bad {axis} range [{start}, {end}) for an image {size} pixels wide/high",
+            f"use 0 <= start_{axis} < end_{axis} <= {size}",
         )
     args = []
     if s > 0:
@@ -260,53 +116,102 @@ def _span_args(
     return args
 
 
-def render(
-    pov_path: str | os.PathLike,
-    out_path: str | os.PathLike,
+def render_switches(
+    image: str | os.PathLike,
     width: int,
     height: int,
     *,
-    extra_args: Sequence[str] = (),
     threads: int = 1,
-    cwd: str | os.PathLike | None = None,
     start_row: int | None = None,
     end_row: int | None = None,
     start_col: int | None = None,
     end_col: int | None = None,
     library_paths: Iterable[str | os.PathLike] = (),
-    timeout: float | None = None,
-) -> Path:
-    """Render ``pov_path`` to ``out_path`` (``width`` x ``height`` pixels).
+    extra_args: Sequence[str] = (),
+    povray_options: PovrayOptions | None = None,
+) -> list[str]:
+    """The switches of a render after the file names: format, size, no anti-aliasing,
+    threads, pixel ranges, library paths, the user's ``povray_options``, then
+    ``extra_args`` (both may override povlens's own switches).
 
-    Runs ``povray -D -V -GR -GS +I<pov> +O<tmp> +F? +W +H -A +WT<threads>
-    [+SR +ER +SC +EC] [+L...] [extra_args]`` with the working directory set to
-    the folder of ``pov_path`` (or ``cwd``).  The output format follows the
-    suffix of ``out_path`` (``.exr`` -> OpenEXR, linear half float; also
-    ``.png``, ``.hdr``, ``.tga``, ``.ppm``).  Anti-aliasing is off (``-A``);
-    ``extra_args`` come last and may override it.
+    Parameters
+    ----------
+    image : the output image; its suffix chooses the format (``.exr``, ``.png``,
+        ``.hdr``, ``.tga``, ``.ppm``).
+    width, height : the rendered image's size, pixels.
+    threads : POV-Ray's render threads (``+WT``).
+    start_row, end_row, start_col, end_col : the traced sub-rectangle, 0-based
+        half-open pixel ranges (:func:`pixel_range_args`).
+    library_paths : folders where POV-Ray looks for ``#include`` files (``+L``, made
+        absolute).
+    extra_args : further POV-Ray switches or ``Name=value`` options of povlens's own
+        (not checked).
+    povray_options : the user's library paths (after ``library_paths``), clock and
+        passthrough options (:class:`~povlens.pov.povray_options.PovrayOptions`,
+        checked when it was made); None for none.
 
-    ``start_row``/``end_row`` and ``start_col``/``end_col`` select a
-    sub-rectangle as 0-based half-open pixel ranges (row 0 = top); the output
-    file still has the full ``width`` x ``height`` size and untraced pixels
-    are black.
+    Returns
+    -------
+    list of str
 
-    The image is written to a temporary name in the folder of ``out_path`` and
-    renamed on success; on failure ``out_path`` is not touched.  Returns
-    ``out_path`` as a :class:`Path`.
-
-    Raises :class:`PovrayError` (carrying POV-Ray's own error text) if POV-Ray
-    is missing or exits with a non-zero status, :class:`UsageError` for bad
-    arguments.  :func:`start_render` is the same without waiting.
+    Raises
+    ------
+    UsageError
+        For an unknown suffix, a size or thread count below 1, or a bad range;
+        :class:`~povlens.errors.ParameterError` if ``povray_options`` is not a
+        :class:`~povlens.pov.povray_options.PovrayOptions`.
     """
-    return start_render(
-        pov_path, out_path, width, height, extra_args=extra_args, threads=threads, cwd=cwd,
-        start_row=start_row, end_row=end_row, start_col=start_col, end_col=end_col,
-        library_paths=library_paths, timeout=timeout,
-    ).wait()  # fmt: skip
+    image = Path(image)
+    fmt = _FORMATS.get(image.suffix.lower())
+    if fmt is None:
+        raise UsageError(
+            f"cannot render to {image}: unknown image suffix {image.suffix!r}",
+            "use one of " + ", ".join(sorted(_FORMATS)),
+        )
+    width, height, threads = int(width), int(height), int(threads)
+    if width < 1 or height < 1:
+        raise UsageError(f"bad image size {width}x{height}", "width and height must be >= 1")
+    if threads < 1:
+        raise UsageError(f"bad thread count {threads}", "use threads >= 1")
+    spans = pixel_range_args(start_row, end_row, height, "row")
+    spans += pixel_range_args(start_col, end_col, width, "col")
+    user = as_povray_options(povray_options).switches()
+    return [
+        fmt, f"+W{width}", f"+H{height}", "-A", f"+WT{threads}",
+        *spans,
+        *(f"+L{Path(p).absolute()}" for p in library_paths),
+        *user,
+        *extra_args,
+    ]  # fmt: skip
+
+
+def povray_command(executable: str, scene: str, image: str, switches: Sequence[str],
+                   error_log: str | None = None) -> list[str]:
+    """The POV-Ray command line rendering ``scene`` to ``image``.
+
+    Parameters
+    ----------
+    executable : the POV-Ray program (:func:`find_povray`).
+    scene, image : file names as POV-Ray sees them from its working directory.
+    switches : from :func:`render_switches`.
+    error_log : a bare file name for POV-Ray's fatal-error log (``+GF``), written
+        into the image's folder; None for none.
+
+    Returns
+    -------
+    list of str
+        ``[executable, -D, -V, -GR, -GS, [+GF<log>], +I<scene>, +O<image>, *switches]``.
+    """
+    log = [f"+GF{error_log}"] if error_log is not None else []
+    return [executable, *_QUIET, *log, f"+I{scene}", f"+O{image}", *switches]
+
+
+# ---------------------------------------------------------------------------
+# starting and watching a process
 
 
 @functools.lru_cache(maxsize=None)
-def _priority_tools() -> tuple[str | None, str | None]:
+def priority_tools() -> tuple[str | None, str | None]:
     """Paths of util-linux ``chrt`` and coreutils ``nice``, or None.  ``chrt`` only
     where Python knows ``SCHED_IDLE`` and a first ``chrt --idle 0 true`` works (a
     sandbox may forbid the policy: chrt would then fail instead of running POV-Ray;
@@ -325,17 +230,16 @@ def _priority_tools() -> tuple[str | None, str | None]:
 
 
 def _lower_priority(nice: int, idle: bool) -> tuple[list[str], object]:
-    """How :func:`start_render` lowers POV-Ray's priority: (command prefix,
+    """How :func:`start_povray` lowers POV-Ray's priority: (command prefix,
     ``preexec_fn``).
 
     A prefix program where there is one: ``chrt --idle 0`` (``SCHED_IDLE``) or
-    ``nice -n N``, which sets the policy and execs POV-Ray in the same process.
-    Popen then starts the child with ``vfork``; a ``preexec_fn`` forces a full
-    ``fork`` of this (large, threaded) process: 6.3-6.6 ms of the caller's time
-    per start instead of 0.8-1.1 ms (measured, 160 MB process), with the
-    interpreter lock held, which the thread writing lens samples waits for.  The
-    ``preexec_fn`` (the same settings, made in the child) is the fallback."""
-    chrt, nice_cmd = _priority_tools()
+    ``nice -n N``, which sets the policy and execs POV-Ray in the same process, so
+    Popen can start the child with ``vfork``; a ``preexec_fn`` forces a full
+    ``fork`` of this large, threaded process with the interpreter lock held
+    (several times slower: docs/decisions/pov.md).  The ``preexec_fn`` (the same
+    settings, made in the child) is the fallback."""
+    chrt, nice_cmd = priority_tools()
     if idle:
         if chrt is not None:
             return [chrt, "--idle", "0"], None
@@ -353,112 +257,55 @@ def _lower_priority(nice: int, idle: bool) -> tuple[list[str], object]:
     return [], None
 
 
-def start_render(
-    pov_path: str | os.PathLike,
-    out_path: str | os.PathLike,
-    width: int,
-    height: int,
-    *,
-    extra_args: Sequence[str] = (),
-    threads: int = 1,
-    cwd: str | os.PathLike | None = None,
-    start_row: int | None = None,
-    end_row: int | None = None,
-    start_col: int | None = None,
-    end_col: int | None = None,
-    library_paths: Iterable[str | os.PathLike] = (),
-    timeout: float | None = None,
-    nice: int = 0,
-    idle: bool = False,
-) -> "RenderJob":
-    """Start the render :func:`render` describes and return at once.
+def start_povray(cmd: Sequence[str], cwd: str | os.PathLike, stderr: IO, *, nice: int = 0,
+                 idle: bool = False) -> subprocess.Popen:
+    """Start the POV-Ray command ``cmd`` (:func:`povray_command`) in the folder ``cwd``.
 
-    ``nice`` > 0 lowers the process's scheduling priority (``os.nice``).  ``idle``
-    runs it only on CPU time nothing else wants (Linux ``SCHED_IDLE``; ``nice 19``
-    where the OS has no such policy): a render started on a guess yields the cores
-    to the work that decides whether it is needed, and gets them all once that
-    work is done.
+    Parameters
+    ----------
+    cmd : the command line.
+    cwd : POV-Ray's working directory (file names in ``cmd`` are relative to it).
+    stderr : an open file for POV-Ray's standard error (a file, not a pipe: nobody
+        reads it while POV-Ray runs, and a chatty scene must not block on it).
+    nice : > 0 lowers the scheduling priority by that much.
+    idle : run only on CPU time nothing else wants (Linux ``SCHED_IDLE``, else
+        nice 19).
 
-    POV-Ray 3.7 spends most of a small render's wall time idle (~0.6 s per
-    process, a few ms of CPU), so independent renders are best started together
-    and collected with :meth:`RenderJob.wait`, which renames the image into place
-    or raises the error :func:`render` would.  ``timeout`` counts from the start.
-    Bad arguments and a missing POV-Ray raise here, before any process starts.
+    Returns
+    -------
+    subprocess.Popen
+        stdin and stdout are ``/dev/null``.
+
+    Raises
+    ------
+    PovrayError
+        If the program cannot be started.
     """
-    pov_path = Path(pov_path).resolve()
-    out_path = Path(out_path).absolute()
-    if not pov_path.is_file():
-        raise UsageError(f"scene file {pov_path} does not exist", "check the path")
-    fmt = _FORMATS.get(out_path.suffix.lower())
-    if fmt is None:
-        raise UsageError(
-            f"cannot render to {out_path}: unknown image suffix {out_path.suffix!r}",
-            "use one of " + ", ".join(sorted(_FORMATS)),
-        )
-    width, height, threads = int(width), int(height), int(threads)
-    if width < 1 or height < 1:
-        raise UsageError(f"bad image size {width}x{height}", "width and height must be >= 1")
-    if threads < 1:
-        raise UsageError(f"bad thread count {threads}", "use threads >= 1")
-    spans = _span_args(start_row, end_row, height, "+SR", "+ER", "row")
-    spans += _span_args(start_col, end_col, width, "+SC", "+EC", "col")
-
-    executable = find_povray()
-    workdir = Path(cwd).absolute() if cwd is not None else pov_path.parent
-    stack = contextlib.ExitStack()
+    prefix, preexec = _lower_priority(nice, idle)
     try:
-        tmp = stack.enter_context(atomic_output(out_path))
-        # POV-Ray 3.7 takes the fatal-error log ("stream") file as a bare name
-        # and writes it into the image's folder ("Stream output files must
-        # reside in same directory as image output file" otherwise).
-        log = tmp.parent / f".povlens-{os.getpid()}-{uuid.uuid4().hex[:12]}.log"
-        stack.callback(lambda: log.unlink(missing_ok=True))
-        # Relative names where possible: POV-Ray's I/O restrictions permit the
-        # working directory.
-        inp = os.path.relpath(pov_path, workdir) if _inside(pov_path, workdir) else str(pov_path)
-        outp = os.path.relpath(tmp, workdir) if _inside(tmp, workdir) else str(tmp)
-        cmd = [
-            executable, "-D", "-V", "-GR", "-GS", f"+GF{log.name}",
-            f"+I{inp}", f"+O{outp}", fmt, f"+W{width}", f"+H{height}", "-A", f"+WT{threads}",
-            *spans,
-            *(f"+L{Path(p).absolute()}" for p in library_paths),
-            *extra_args,
-        ]  # fmt: skip
-        # stderr goes to an unnamed file, not a pipe: nobody reads it while POV-Ray
-        # runs, and a chatty scene must not block on a full pipe.
-        err = stack.enter_context(tempfile.TemporaryFile())
-        prefix, preexec = _lower_priority(nice, idle)
-        try:
-            proc = subprocess.Popen(
-                prefix + cmd,
-                cwd=workdir,
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                stderr=err,
-                preexec_fn=preexec,
-            )
-        except FileNotFoundError:
-            raise PovrayError(
-                f"POV-Ray at {executable} could not be started",
-                f"check the installation or set {ENV_VAR} to a working povray",
-            ) from None
-        except OSError as exc:
-            raise PovrayError(
-                f"cannot run POV-Ray ({executable}) in {workdir}: {exc.strerror or exc}",
-                "check that the folder exists and the program is executable",
-            ) from None
-    except BaseException as exc:
-        stack.__exit__(type(exc), exc, exc.__traceback__)
-        raise
-    deadline = None if timeout is None else time.monotonic() + timeout
-    return RenderJob(proc, stack, cmd, workdir, pov_path, out_path, tmp, log, err,
-                     timeout, deadline)
+        return subprocess.Popen(
+            prefix + list(cmd),
+            cwd=cwd,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+            preexec_fn=preexec,
+        )
+    except FileNotFoundError:
+        raise PovrayError(
+            f"POV-Ray at {cmd[0]} could not be started",
+            f"check the installation or set {ENV_VAR} to a working povray",
+        ) from None
+    except OSError as exc:
+        raise PovrayError(
+            f"cannot run POV-Ray ({cmd[0]}) in {cwd}: {exc.strerror or exc}",
+            "check that the folder exists and the program is executable",
+        ) from None
 
 
-#: No POV-Ray run has written its image this soon after its start (s): a 64x48
-#: image appears 0.33 s after the start (:func:`output_written`), POV-Ray's start-up
-#: alone sits idle ~0.2 s.  Waiting jobs are not examined before then, and are
-#: polled less often, so they take less time from the Python threads that work.
+#: No POV-Ray run has written its image this soon after its start (s): POV-Ray's
+#: start-up alone sits idle ~0.2 s (docs/decisions/pov.md).  Younger jobs are not
+#: examined, so waiting takes less time from the Python threads that work.
 FIRST_OUTPUT_S = 0.2
 
 
@@ -467,8 +314,7 @@ def output_written(pid: int, path: Path) -> bool:
     descriptor in /proc/PID/fd points to it).
 
     POV-Ray 3.7 writes its image in one go at the end of the render and then
-    spends ~0.3 s idle before it exits (measured: a 64x48 image appears 0.33 s
-    after the start, the process exits at 0.64-0.68 s).  The image is final once
+    idles ~0.3 s before it exits (docs/decisions/pov.md); the image is final once
     closed, so the caller need not wait for the exit.  Only a process running a
     POV-Ray executable is judged early: a wrapper script in POVLENS_POVRAY (its
     executable is the shell) may still have work to do after its POV-Ray child
@@ -495,6 +341,128 @@ def output_written(pid: int, path: Path) -> bool:
         return True
     except OSError:
         return False
+
+
+def povray_finished(proc: subprocess.Popen, image: str | os.PathLike, age_s: float) -> bool:
+    """True once POV-Ray has exited, or has written and closed ``image``
+    (:func:`output_written`; it is then killed, as nothing is left but its shutdown,
+    and ``proc.returncode`` is set to 0).
+
+    Parameters
+    ----------
+    proc : the process of :func:`start_povray`.
+    image : the image it writes.
+    age_s : seconds since it started; below :data:`FIRST_OUTPUT_S` only its exit is
+        checked.
+    """
+    if proc.poll() is not None:
+        return True
+    if age_s < FIRST_OUTPUT_S:
+        return False
+    if output_written(proc.pid, Path(image)):
+        proc.kill()  # SIGTERM would run POV-Ray's slow shutdown
+        proc.wait()
+        proc.returncode = 0
+        return True
+    return False
+
+
+# ---------------------------------------------------------------------------
+# rendering
+
+
+def render(pov_path: str | os.PathLike, out_path: str | os.PathLike, width: int, height: int,
+           **options) -> Path:
+    """Render ``pov_path`` to ``out_path`` (``width`` x ``height`` pixels) and wait.
+
+    Runs ``povray -D -V -GR -GS +I<pov> +O<tmp> +F? +W +H -A +WT<threads>
+    [+SR +ER +SC +EC] [+L...] [povray_options] [extra_args]`` with the working
+    directory set to the folder of ``pov_path`` (or ``cwd``).  The output format follows the
+    suffix of ``out_path`` (``.exr`` -> OpenEXR, linear half float; also
+    ``.png``, ``.hdr``, ``.tga``, ``.ppm``).  Anti-aliasing is off (``-A``);
+    ``povray_options`` and ``extra_args`` come last and may override it.
+
+    ``options`` are the keyword arguments of :func:`start_render`: ``extra_args``,
+    ``threads``, ``cwd``, ``start_row``/``end_row`` and ``start_col``/``end_col``
+    (a sub-rectangle as 0-based half-open pixel ranges, row 0 = top; the output
+    file still has the full ``width`` x ``height`` size and untraced pixels are
+    black), ``library_paths``, ``povray_options`` (the user's library paths, clock
+    and passthrough options: :class:`~povlens.pov.povray_options.PovrayOptions`),
+    ``timeout`` (s), ``nice``, ``idle``.
+
+    The image is written to a temporary name in the folder of ``out_path`` and
+    renamed on success; on failure ``out_path`` is not touched.  Returns
+    ``out_path`` as a :class:`Path`.
+
+    Raises :class:`PovrayError` (carrying POV-Ray's own error text) if POV-Ray
+    is missing or exits with a non-zero status, :class:`UsageError` for bad
+    arguments.
+    """
+    return start_render(pov_path, out_path, width, height, **options).wait()
+
+
+def start_render(
+    pov_path: str | os.PathLike,
+    out_path: str | os.PathLike,
+    width: int,
+    height: int,
+    *,
+    extra_args: Sequence[str] = (),
+    threads: int = 1,
+    cwd: str | os.PathLike | None = None,
+    start_row: int | None = None,
+    end_row: int | None = None,
+    start_col: int | None = None,
+    end_col: int | None = None,
+    library_paths: Iterable[str | os.PathLike] = (),
+    povray_options: PovrayOptions | None = None,
+    timeout: float | None = None,
+    nice: int = 0,
+    idle: bool = False,
+) -> "RenderJob":
+    """Start the render :func:`render` describes and return at once.
+
+    ``nice`` > 0 lowers the process's scheduling priority (``os.nice``).  ``idle``
+    runs it only on CPU time nothing else wants (Linux ``SCHED_IDLE``; ``nice 19``
+    where the OS has no such policy): a render started on a guess yields the cores
+    to the work that decides whether it is needed, and gets them all once that
+    work is done.
+
+    POV-Ray 3.7 spends most of a small render's wall time idle (~0.6 s per
+    process, a few ms of CPU), so independent renders are best started together
+    and collected with :meth:`RenderJob.wait`, which renames the image into place
+    or raises the error :func:`render` would.  ``timeout`` counts from the start.
+    Bad arguments and a missing POV-Ray raise here, before any process starts.
+    """
+    pov_path = Path(pov_path).resolve()
+    out_path = Path(out_path).absolute()
+    if not pov_path.is_file():
+        raise UsageError(f"scene file {pov_path} does not exist", "check the path")
+    switches = render_switches(out_path, width, height, threads=threads, start_row=start_row,
+                               end_row=end_row, start_col=start_col, end_col=end_col,
+                               library_paths=library_paths, extra_args=extra_args,
+                               povray_options=povray_options)
+    executable = find_povray()
+    workdir = Path(cwd).absolute() if cwd is not None else pov_path.parent
+    stack = contextlib.ExitStack()
+    try:
+        tmp = stack.enter_context(atomic_output(out_path))
+        # the fatal-error log: a bare name, written into the image's folder
+        log = tmp.parent / f".povlens-{os.getpid()}-{uuid.uuid4().hex[:12]}.log"
+        stack.callback(lambda: log.unlink(missing_ok=True))
+        # Relative names where possible: POV-Ray's I/O restrictions permit the
+        # working directory.
+        inp = os.path.relpath(pov_path, workdir) if _inside(pov_path, workdir) else str(pov_path)
+        outp = os.path.relpath(tmp, workdir) if _inside(tmp, workdir) else str(tmp)
+        cmd = povray_command(executable, inp, outp, switches, error_log=log.name)
+        err = stack.enter_context(tempfile.TemporaryFile())
+        proc = start_povray(cmd, workdir, err, nice=nice, idle=idle)
+    except BaseException as exc:
+        stack.__exit__(type(exc), exc, exc.__traceback__)
+        raise
+    deadline = None if timeout is None else time.monotonic() + timeout
+    return RenderJob(proc, stack, cmd, workdir, pov_path, out_path, tmp, log, err,
+                     timeout, deadline)
 
 
 class RenderJob:
@@ -543,19 +511,15 @@ class RenderJob:
 
     def _collect(self) -> None:
         # Poll rather than wait: the image is final when POV-Ray has closed it,
-        # ~0.3 s before the process exits (output_written); it is stopped then.
+        # ~0.3 s before the process exits (povray_finished stops it then).
         while True:
-            returncode = self.proc.poll()
-            if returncode is not None:
+            age_s = time.monotonic() - self._started
+            if povray_finished(self.proc, self._tmp, age_s):
+                returncode = self.proc.returncode
                 break
-            if time.monotonic() - self._started < FIRST_OUTPUT_S:
+            if age_s < FIRST_OUTPUT_S:
                 time.sleep(0.02)    # too young to have written its image: fewer wake-ups
                 continue
-            if output_written(self.proc.pid, self._tmp):
-                self.proc.kill()  # SIGTERM would run POV-Ray's slow shutdown
-                self.proc.wait()
-                returncode = 0
-                break
             if self._deadline is not None and time.monotonic() > self._deadline:
                 raise PovrayError(
                     f"POV-Ray did not finish rendering {self.pov_path} within {self._timeout} s",
@@ -568,7 +532,7 @@ class RenderJob:
         if returncode != 0:
             raise PovrayError(
                 f"POV-Ray failed on {self.pov_path} (exit status {returncode}):\n"
-                + _error_text(stderr, log_text)
+                + povray_error_text(stderr, log_text)
                 + f"\n(command, run in {self._workdir}: {shlex.join(self.cmd)})",
                 "fix the scene file named above, or run the command by hand "
                 "to see POV-Ray's whole output",
@@ -576,7 +540,7 @@ class RenderJob:
         if not self._tmp.exists() or self._tmp.stat().st_size == 0:
             raise PovrayError(
                 f"POV-Ray reported success on {self.pov_path} but wrote no image:\n"
-                + _error_text(stderr, log_text),
+                + povray_error_text(stderr, log_text),
                 "check that the output folder is writable by POV-Ray "
                 "(see /etc/povray/3.7/povray.conf, [Permitted Paths])",
             )

@@ -1,13 +1,16 @@
 """Baselines for the exit-pupil table: pbrt's 64 boxes and naive rear-element sampling.
 
-Both offer the sampler interface of :class:`povlens.pupil.PupilTable`
-(``sample(film_xy, u) -> LensSample``, ``pass_fraction``, ``irradiance_factor``)
-so benchmarks and renders can swap them.  Both sample on pbrt's plane, the
-rear-vertex plane ``z = film_distance`` (camera frame of :mod:`povlens.frames`),
-and weight a ray by ``cos^4(theta) / z^2 / pdf`` as in ``realistic-camera.md``
-§5.4, so both are unbiased as long as their regions hold every ray that passes.
+Both offer the sampler interface of :class:`povlens.pupil.table.PupilTable`
+(:mod:`povlens.pupil.sampler`: ``sample(film_xy, u) -> LensSample``,
+``pass_fraction``, ``irradiance_factor``) so benchmarks and renders can swap
+them.  Both sample on pbrt's plane, the rear-vertex plane ``z = film_distance``
+(camera frame of :mod:`povlens.lens.frames`), and weight a ray by
+``cos^4(theta) / z^2 / pdf`` (the camera measurement equation, *Physically Based
+Rendering*, 3rd ed., §6.4.7), so both are unbiased as long as their regions hold
+every ray that passes.
 
-:class:`PbrtBoxes` -- pbrt-v4's ``BoundExitPupil`` (``realistic-camera.md`` §5.1):
+:class:`PbrtBoxes` -- pbrt-v4's ``RealisticCamera::BoundExitPupil`` (``cameras.cpp``;
+    the exit-pupil bounds of *Physically Based Rendering*, 3rd ed., §6.4.5):
     64 radial intervals of the film half-diagonal; for interval k, film points
     spread evenly over [k, k+1] hd/64 on +x and rear points on the square
     [-1.5 r, 1.5 r]^2 (r the rear element's clear radius) from the radical
@@ -20,8 +23,8 @@ and weight a ray by ``cos^4(theta) / z^2 / pdf`` as in ``realistic-camera.md``
     w = cos^4(theta), which ignores the box areas: the cause of the 64 rings of
     pbrt-v3 #162 (kept to show the ring detector works).
 
-:class:`NaiveRearElement` -- the 2012 paper's method: rays toward points spread
-    uniformly over the rear element's disc, whatever the film point.  The disc
+:class:`NaiveRearElement` -- the method of the 2012 paper the README names: rays
+    toward points spread uniformly over the rear element's disc, whatever the film point.  The disc
     is the rear clear aperture, widened just enough to hold every ray that meets
     the curved rear surface inside its aperture from any film point out to the
     half-diagonal (for a curved rear surface a ray crosses the vertex plane a
@@ -37,7 +40,8 @@ import numpy as np
 
 from povlens.errors import UsageError
 from povlens.lens.prescription import LensPrescription, sag_mm
-from povlens.pupil.table import LensSample, SamplerMeasurements, _check_sample_args, _polar, finish_sample
+from povlens.pupil.sampler import (LensSample, SamplerMeasurements, check_sample_arguments,
+                                   finish_sample, polar_film_coordinates)
 from povlens.lens.tracer import trace_from_film
 
 __all__ = ["PbrtBoxes", "NaiveRearElement", "radical_inverse", "PBRT_INTERVALS",
@@ -211,8 +215,8 @@ class PbrtBoxes(SamplerMeasurements):
     def sample(self, film_xy, u) -> LensSample:
         """pbrt's SampleExitPupil: a point of the interval's box, rotated to the film
         point's azimuth; pdf 1 / box area."""
-        f, uu = _check_sample_args(film_xy, u)
-        r, cos_phi, sin_phi = _polar(f)
+        f, uu = check_sample_arguments(film_xy, u)
+        r, cos_phi, sin_phi = polar_film_coordinates(f)
         k = self.interval(r)
         b = self.boxes[k]
         lx = b[:, 0] + uu[:, 0] * (b[:, 1] - b[:, 0])
@@ -266,7 +270,7 @@ class NaiveRearElement(SamplerMeasurements):
 
     def sample(self, film_xy, u) -> LensSample:
         """A uniform point of the disc (polar map), the same for every film point."""
-        f, uu = _check_sample_args(film_xy, u)
+        f, uu = check_sample_arguments(film_xy, u)
         rad = self.radius_mm * np.sqrt(uu[:, 1])
         ang = 2.0 * math.pi * uu[:, 0]
         px, py = rad * np.cos(ang), rad * np.sin(ang)

@@ -1,6 +1,6 @@
 """Exact lens rays per pixel and sample, placed in the POV-Ray scene.
 
-Placement (camera frame of :mod:`povlens.frames` -> POV-Ray world)
+Placement (camera frame of :mod:`povlens.lens.frames` -> POV-Ray world)
 ------------------------------------------------------------------
 The scene's camera ``location`` is taken as the lens's **entrance-pupil centre**,
 the perspective centre of the real lens, so a pinhole render from ``location``
@@ -11,7 +11,7 @@ frames the scene as the lens does.  The film centre therefore sits
 
 with unit ``right``, ``up``, ``forward`` from the scene camera (POV-Ray: right =
 normalize(sky x forward), up = forward x right).  Film x maps to world right, so
-the image inversion of :mod:`povlens.film` makes pixel columns run left to right
+the image inversion of :mod:`povlens.lens.film` makes pixel columns run left to right
 in the scene as POV-Ray's own cameras do.
 
 Samples
@@ -19,7 +19,7 @@ Samples
 Sample k of pixel p uses the k-th point of a scrambled 4-D Sobol sequence
 (film jitter, pupil u), shifted per pixel by a random Cranley-Patterson
 rotation so that neighbouring pixels do not share sample positions (shared
-positions show as ghosting).  The pupil sampler (:mod:`povlens.pupil`) turns
+positions show as ghosting).  The pupil sampler (:mod:`povlens.pupil.sampler`) turns
 (film point, u) into a ray toward the exit pupil with its radiometric weight.
 """
 
@@ -116,7 +116,7 @@ def sample_rays(lens: LensPrescription, film_distance_mm: float, film: Film, sam
 
     sampler : an object with ``sample(film_xy (n, 2), u (n, 2))`` returning
         ``film_point``, ``direction``, ``weight`` and ``valid`` arrays (see
-        :mod:`povlens.pupil`).
+        :mod:`povlens.pupil.sampler`).
     points : (H, W, 4) from :func:`sample_points`.
     rows : film rows [start, end) to sample (default all); the other rows get no
         ray (``valid`` False, weight 0) and cost nothing.

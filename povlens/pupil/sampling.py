@@ -16,13 +16,13 @@ Point sets (all float64 in [0, 1)^d, reproducible from ``seed``)
 Lens samplers
 -------------
 Any object with ``sample(film_xy (n, 2) mm, u (n, 2)) -> LensSample`` (see
-:class:`povlens.pupil.LensSample`): the exit-pupil table
-(:class:`povlens.pupil.PupilTable`) and the baselines of
-:mod:`povlens.pupil_baselines`.  ``sample`` only proposes a ray and its weight;
+:mod:`povlens.pupil.sampler`): the exit-pupil table
+(:class:`povlens.pupil.table.PupilTable`) and the baselines of
+:mod:`povlens.pupil.baselines`.  ``sample`` only proposes a ray and its weight;
 whether the ray gets through is decided by tracing it.  The estimate of the
 irradiance factor E/L at a film point (the irradiance a uniform scene of unit
-radiance produces there, camera-measurement equation of
-``realistic-camera.md`` §5.4) is the mean of ``weight * passed``; it is unbiased
+radiance produces there: the camera measurement equation, *Physically Based
+Rendering*, 3rd ed., §6.4.7) is the mean of ``weight * passed``; it is unbiased
 whenever the sampler's region contains every ray that passes.
 
 :func:`exposure_normalisation` returns the factor that scales weights so that
@@ -39,7 +39,6 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy.stats import qmc
 
 from povlens.errors import OpticsError, UsageError
 from povlens.lens.prescription import LensPrescription
@@ -62,6 +61,7 @@ def sobol_points(n: int, d: int = 2, *, seed: int = 0) -> np.ndarray:
     n = _check_n(n)
     if n == 0:
         return np.zeros((0, d))
+    from scipy.stats import qmc  # heavy: imported when points are first needed
     m = max(0, math.ceil(math.log2(n)))
     pts = qmc.Sobol(d=d, scramble=True, seed=seed).random_base2(m)[:n]
     return np.minimum(pts, np.nextafter(1.0, 0.0))
@@ -72,6 +72,7 @@ def halton_points(n: int, d: int = 2, *, seed: int = 0) -> np.ndarray:
     n = _check_n(n)
     if n == 0:
         return np.zeros((0, d))
+    from scipy.stats import qmc  # heavy: imported when points are first needed
     pts = qmc.Halton(d=d, scramble=True, seed=seed).random(n)
     return np.minimum(pts, np.nextafter(1.0, 0.0))
 

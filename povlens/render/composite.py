@@ -2,8 +2,8 @@
 
 Each lens sample is rendered to its own (linear, EXR) image; the final image
 is their mean, optionally weighted per pixel.  Images are read as float32 and
-summed in float64, so half-float EXRs never accumulate in half precision
-(reference §9.3).
+summed in float64, so half-float EXRs never accumulate in half precision (POV-Ray
+writes EXR as half floats; OpenImageIO's own ``add`` keeps its input's format).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def composite(
         0 come out as 0 (never NaN).
     drop_top_rows : rows removed from the top of every image first (1 for the
         POV-Ray 3.7.0.x mesh_camera row workaround, see
-        :func:`povlens.mesh_camera.render_size`).
+        :func:`povlens.pov.mesh.render_size`).
 
     Raises :class:`PovlensError` naming the offending file for unreadable
     images, mismatched sizes or bad weights.

@@ -16,8 +16,9 @@ so an interrupted run never leaves a half-written file at a final name):
 Re-running skips every unit whose outputs exist: that is how an interrupted
 render resumes.
 
-Compositing of lens samples (Monte-Carlo estimate of the camera measurement,
-realistic-camera.md §5.4): for pixel p and samples k = 1..N with weights
+Compositing of lens samples (Monte-Carlo estimate of the camera measurement
+equation, Pharr, Jakob and Humphreys, *Physically Based Rendering*, 3rd ed.,
+§6.4.7): for pixel p and samples k = 1..N with weights
 w_k(p) = cos^4(theta) / (z^2 pdf) (0 when blocked),
 
     image(p) = exposure * (1/N) sum_k w_k(p) I_k(p),
@@ -28,71 +29,73 @@ bright as the pinhole render, and vignetting shows as it would on film.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
-from povlens.plan.convert import read_plan
-from povlens.errors import PovlensError, PovrayError
-from povlens.lens.film import Film
+from povlens.errors import ParameterError, PovlensError, PovrayError
+from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.schema import Plan, PovraySettings, read_plan
+from povlens.pupil.sampling import exposure_normalisation
+from povlens.pupil.storage import cached_pupil_table
 from povlens.render.composite import composite
 from povlens.util.images import read_image, write_exr, write_png_srgb
 from povlens.pupil.rays import ScenePlacement, sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
 from povlens.util.files import write_text
 from povlens.lens.paraxial import stopped_down
-from povlens.pov.process import FIRST_OUTPUT_S, find_povray, output_written, render as povray_render
+from povlens.pov.povray_output import povray_error_text
+from povlens.pov.executable import find_povray
+from povlens.pov.process import (pixel_range_args, povray_command, povray_finished,
+                                 render as povray_render, render_switches, start_povray)
 from povlens.lens.prescription import read_lens
 
-__all__ = ["convert_and_render", "render_samples", "render_batch", "sample_rows", "samples_per_pixel", "render_view", "composite_outdir", "render_outdir", "pupil_table_for",
-           "lens_for"]
+__all__ = ["convert_and_render", "render_samples", "render_batch", "sample_rows",
+           "samples_per_pixel", "render_view", "composite_outdir", "render_outdir",
+           "pupil_table_for", "lens_for", "exposure_for", "film_row_args", "EarlyRender",
+           "POVRAY_IN_FLIGHT"]
 
 
-def lens_for(plan: dict):
-    inp = plan["inputs"]
-    lens = stopped_down(read_lens(inp["lens"]), stop_diameter_mm=inp["stop_diameter_mm"],
-                        f_number=inp["f_number"])
-    if lens.sha256() != inp["lens_sha256"]:
-        raise PovlensError(f"the lens file {inp['lens']} changed since 'povlens convert'",
+def lens_for(plan: Plan):
+    """The plan's lens, read again and stopped down as the plan says; refused if the
+    file changed since the conversion."""
+    inp = plan.inputs
+    lens = stopped_down(read_lens(inp.lens), stop_diameter_mm=inp.stop_diameter_mm,
+                        f_number=inp.f_number)
+    if lens.sha256() != inp.lens_sha256:
+        raise PovlensError(f"the lens file {inp.lens} changed since 'povlens convert'",
                            "run 'povlens convert' again")
     return lens
 
 
-def film_for(plan: dict) -> Film:
-    f = plan["film"]
-    return Film(f["width_mm"], f["height_mm"], f["width_px"], f["height_px"])
-
-
-def pupil_table_for(outdir: Path, plan: dict, lens):
+def pupil_table_for(outdir: Path, plan: Plan, lens):
     """The exit-pupil table of this plan, from ``pupil.npz`` if it is current."""
-    from povlens.pupil.table import build_pupil_table, load_if_current
-    path = Path(outdir) / "pupil.npz"
-    film = film_for(plan)
-    fd = plan["focus"]["film_distance_mm"]
-    table = load_if_current(path, lens, fd, film.half_diagonal_mm) if path.exists() else None
-    if table is None:
-        table = build_pupil_table(lens, fd, film.half_diagonal_mm)
-        table.save(path)
+    film = plan.film
+    table, _ = cached_pupil_table(Path(outdir) / "pupil.npz", lens,
+                                  plan.focus.film_distance_mm, film.half_diagonal_mm)
     return table
 
 
-def _exposure(outdir: Path, plan: dict, lens, table) -> float:
-    """1 / (E/L)(0), cached in ``exposure.txt`` beside the table."""
+def exposure_for(outdir: Path, plan: Plan, lens, table) -> float:
+    """The composite's exposure 1 / (E/L)(0) (film centre as bright as the pinhole
+    render), cached in ``exposure.txt`` beside the table."""
     path = Path(outdir) / "exposure.txt"
     if path.exists():
         try:
             return float(path.read_text())
         except ValueError:
             pass
-    from povlens.pupil.sampling import exposure_normalisation
-    e = exposure_normalisation(table, lens, plan["focus"]["film_distance_mm"])
+    e = exposure_normalisation(table, lens, plan.focus.film_distance_mm)
     write_text(path, f"{e!r}\n")
     return e
 
@@ -113,47 +116,44 @@ def _sample_done(outdir: Path, k: int) -> bool:
     return weight.exists() and (exr.exists() or _blocked_path(outdir, k).exists())
 
 
-def sample_rows(plan: dict, k: int) -> tuple[int, int]:
+def sample_rows(plan: Plan, k: int) -> tuple[int, int]:
     """Film rows [start, end) sample k renders (all rows unless the plan is adaptive)."""
-    rows = plan.get("sample_rows")
-    if rows is None:
-        return 0, plan["film"]["height_px"]
-    return int(rows[k][0]), int(rows[k][1])
+    return plan.rows_of_sample(k)
 
 
-def samples_per_pixel(plan: dict) -> np.ndarray:
+def samples_per_pixel(plan: Plan) -> np.ndarray:
     """(H,) number of samples whose rows include each film row (N_p of a pixel)."""
-    h = plan["film"]["height_px"]
+    h = plan.film.height_px
     n = np.zeros(h, dtype=np.int64)
-    for k in range(plan["inputs"]["samples"]):
+    for k in range(plan.inputs.samples):
         r0, r1 = sample_rows(plan, k)
         n[r0:r1] += 1
     return n
 
 
-def _write_mesh(plan: dict, lens, table, outdir: Path, k: int,
+def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
                 points: np.ndarray | None = None) -> bool:
     """Write sample k's ray mesh and weights.
 
     ``table`` is the lens sampler (the plan's exit-pupil table; any object with
-    the ``sample(film_xy, u)`` protocol of :func:`povlens.lens_camera.sample_rays`
+    the ``sample(film_xy, u)`` protocol of :func:`povlens.pupil.rays.sample_rays`
     works).  ``points`` overrides the plan's (H, W, 4) sample points of sample k
-    (default: :func:`povlens.lens_camera.sample_points`); :mod:`povlens.bench`
+    (default: :func:`povlens.pupil.rays.sample_points`); :mod:`povlens.bench`
     uses both to render with the baseline samplers and random points.
     """
-    film = film_for(plan)
-    pl = plan["placement"]
-    placement = ScenePlacement(np.array(pl["film_centre"]), np.array(pl["right"]),
-                               np.array(pl["up"]), np.array(pl["forward"]), pl["mm_per_unit"])
-    inp = plan["inputs"]
+    film = plan.film
+    pl = plan.placement
+    placement = ScenePlacement(np.array(pl.film_centre), np.array(pl.right), np.array(pl.up),
+                               np.array(pl.forward), pl.mm_per_unit)
+    inp = plan.inputs
     if points is None:
-        points = sample_points(inp["samples"], film.height_px, film.width_px, inp["seed"])(k)
+        points = sample_points(inp.samples, film.height_px, film.width_px, inp.seed)(k)
     else:
         points = np.array(points, dtype=np.float64)
-    if not inp.get("jitter", True):
+    if not inp.jitter:
         points[..., :2] = 0.5  # pixel centres, as POV-Ray's perspective camera
     r0, r1 = sample_rows(plan, k)
-    rays = sample_rays(lens, plan["focus"]["film_distance_mm"], film, table, placement, points,
+    rays = sample_rays(lens, plan.focus.film_distance_mm, film, table, placement, points,
                        rows=(r0, r1))  # rows this sample does not render: no rays, weight 0
     exr, weight_path, inc = _sample_paths(outdir, k)
     valid, weight = rays.valid, rays.weight
@@ -164,7 +164,7 @@ def _write_mesh(plan: dict, lens, table, outdir: Path, k: int,
         return False
     part = inc.with_name(inc.name + ".part")
     t = write_ray_mesh(part, "PovlensRays", rays.origin, rays.direction, valid,
-                       sink_centre=plan["sink_centre"])
+                       sink_centre=plan.sink_centre)
     with open(part, "a") as f:
         f.write(f"#declare PovlensTranslate = <{t[0]:.17g}, {t[1]:.17g}, {t[2]:.17g}>;\n")
     os.replace(part, inc)
@@ -172,28 +172,27 @@ def _write_mesh(plan: dict, lens, table, outdir: Path, k: int,
     return True
 
 
-def _row_args(plan: dict, rows: tuple[int, int] | None) -> list[str]:
-    """+SR/+ER for film rows [r0, r1): output row = film row + drop_top_rows, POV-Ray
-    rows count from 1 and values <= 1 are fractions (see povray._span_args)."""
-    pv = plan["povray"]
-    drop, rh = pv["drop_top_rows"], pv["render_height"]
-    r0, r1 = rows if rows is not None else (0, plan["film"]["height_px"])
-    s, e = r0 + drop, r1 + drop            # 0-based half-open output rows
-    args = []
-    if s > 0:
-        args.append(f"+SR{s + 1}")
-    if e < rh:
-        args.append(f"+ER{e}" if e >= 2 else f"+ER{1.5 / rh:.9f}")
-    return args
+def film_row_args(povray: PovraySettings, rows: tuple[int, int]) -> list[str]:
+    """POV-Ray's +SR/+ER switches rendering only the film rows ``rows``.
+
+    Parameters
+    ----------
+    povray : the plan's POV-Ray settings (``drop_top_rows``, ``render_height``).
+    rows : film rows [r0, r1), 0 = top.
+
+    Returns
+    -------
+    list of str
+        Output row = film row + drop_top_rows (:func:`povlens.pov.process.pixel_range_args`).
+    """
+    r0, r1 = rows
+    drop = povray.drop_top_rows
+    return pixel_range_args(r0 + drop, r1 + drop, povray.render_height, "row")
 
 
-#: POV-Ray processes in flight per core (``render_outdir``) or per batch
-#: (``povlens render-batch``, make runs one per job).  Each POV-Ray run
-#: spends ~0.6 s of wall time idle (start-up and frame hand-over; user CPU ~0.01 s,
-#: povray-mesh-camera.md §10.3): measured here, 8 tiny renders take 5.5 s one
-#: after another and 0.72 s as 8 parallel processes.  So every lens sample is its
-#: own POV-Ray process, several in flight, and the idle time of one
-#: overlaps the parse and trace of the others.
+#: POV-Ray processes in flight per core (``render_outdir``) or per batch (``povlens
+#: render-batch``): each run idles ~0.6 s in start-up, so several overlap on a core
+#: (measurements: docs/decisions/planning.md, "POV-Ray processes in flight").
 POVRAY_IN_FLIGHT = 4
 
 
@@ -204,7 +203,7 @@ class _SampleRenders:
     file there, so a chatty scene cannot fill a pipe) and is renamed to
     ``sample_KKKK.exr`` when POV-Ray succeeds; its mesh is deleted then."""
 
-    def __init__(self, plan: dict, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT,
+    def __init__(self, plan: Plan, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT,
                  on_done=None):
         self.plan, self.outdir, self.batch = plan, Path(outdir), batch
         self.on_done = on_done
@@ -216,32 +215,24 @@ class _SampleRenders:
     def start(self, k: int) -> None:
         while len(self.running) >= self.limit:
             self._reap(block=True)
-        pv = self.plan["povray"]
+        pv = self.plan.povray
         pov = self.samples / f"batch_{self.batch:03d}.pov"
         tmp = Path(tempfile.mkdtemp(prefix=f".sample_{k:04d}.", dir=self.samples))
         rel = os.path.relpath(tmp, self.samples)
-        cmd = [find_povray(), "-D", "-V", "-GR", "-GS", f"+I{pov.name}", f"+O{rel}/f.exr",
-               "+FE", f"+W{pv['render_width']}", f"+H{pv['render_height']}", "-A", "+WT1",
-               f"+L{Path(self.plan['inputs']['scene']).parent}",
-               f"Declare=PovlensFrame={k}"] + _row_args(self.plan, sample_rows(self.plan, k))
+        switches = render_switches(
+            "f.exr", pv.render_width, pv.render_height, threads=1,
+            library_paths=[Path(self.plan.inputs.scene).parent],
+            extra_args=[f"Declare=PovlensFrame={k}",
+                        *film_row_args(pv, self.plan.rows_of_sample(k))])
+        cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
         with open(tmp / "stderr.txt", "w") as err:
-            proc = subprocess.Popen(cmd, cwd=self.samples, stdin=subprocess.DEVNULL,
-                                    stdout=subprocess.DEVNULL, stderr=err)
+            proc = start_povray(cmd, self.samples, err)
         self.running[k] = (proc, tmp, time.perf_counter())
 
     def _finished(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
         """POV-Ray exited, or wrote and closed its image (it then idles ~0.3 s
-        before exiting: :func:`povlens.povray.output_written`)."""
-        if proc.poll() is not None:
-            return True
-        if time.perf_counter() - self.running[k][2] < FIRST_OUTPUT_S:
-            return False
-        if output_written(proc.pid, tmp / "f.exr"):
-            proc.kill()  # nothing left but its shutdown (SIGTERM would run it)
-            proc.wait()
-            proc.returncode = 0
-            return True
-        return False
+        before exiting: :func:`povlens.pov.process.povray_finished`)."""
+        return povray_finished(proc, tmp / "f.exr", time.perf_counter() - self.running[k][2])
 
     def _reap(self, block: bool) -> None:
         while True:
@@ -263,10 +254,9 @@ class _SampleRenders:
     def _collect(self, k: int, proc: subprocess.Popen, tmp: Path) -> None:
         pov = self.samples / f"batch_{self.batch:03d}.pov"
         if proc.returncode != 0:
-            from povlens.pov.process import _error_text
             stderr = (tmp / "stderr.txt").read_text(errors="replace")
             raise PovrayError(f"POV-Ray failed on {pov}, lens sample {k} (exit status "
-                              f"{proc.returncode}):\n" + _error_text(stderr, ""),
+                              f"{proc.returncode}):\n" + povray_error_text(stderr, ""),
                               "fix the scene, or run 'make' in the folder to see the command")
         out = tmp / "f.exr"
         if not out.exists():
@@ -281,8 +271,7 @@ class _SampleRenders:
     def abort(self) -> None:
         """Stop every running process (an error, an interrupt, a cancelled guess).
         SIGKILL: what a sample's POV-Ray holds is its temporary folder, deleted here,
-        and SIGTERM would run POV-Ray's shutdown, ~0.3-0.6 s of idle wall time each
-        (a cancelled early render waited 1.2 s for 8 of them)."""
+        and SIGTERM would run POV-Ray's slow shutdown (docs/decisions/planning.md)."""
         for p, _, _ in self.running.values():
             p.kill()
         for k, (p, tmp, _) in list(self.running.items()):
@@ -292,7 +281,7 @@ class _SampleRenders:
         self.running.clear()
 
 
-def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: int,
+def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: int,
                    samples, points=None, in_flight: int = POVRAY_IN_FLIGHT,
                    stop=None, on_done=None, plan_for=None) -> dict:
     """Trace, write and render lens samples ``samples`` of batch ``batch``, pipelined.
@@ -305,7 +294,7 @@ def render_samples(plan: dict, lens, sampler, outdir: str | os.PathLike, batch: 
     (:mod:`povlens.bench`).  ``stop``: a :class:`threading.Event`; once set, no
     further sample starts and the running ones are stopped.  ``on_done()`` is called
     as each sample is finished (progress).  ``samples`` may be any iterable of
-    sample numbers (a generator that waits for more: :class:`_EarlyRender`), and
+    sample numbers (a generator that waits for more: :class:`EarlyRender`), and
     ``plan_for(k)`` the plan to trace sample k with (default ``plan``; plans that
     differ only in the sample count give the same sample k).  Returns timings: {samples, blocked,
     rays_and_meshes_s (Python), povray_s (summed over the overlapping processes),
@@ -353,10 +342,10 @@ def render_batch(outdir: str | os.PathLike, batch: int,
     """Render batch ``batch`` of a mesh plan; returns the samples it rendered (resumes)."""
     outdir = Path(outdir)
     plan = read_plan(outdir)
-    if plan["inputs"]["method"] != "mesh":
-        raise PovlensError(f"{outdir} was converted with --method {plan['inputs']['method']}; "
-                           f"it has no sample batches", "use 'povlens render-view'")
-    batches = plan["batches"]
+    if plan.inputs.method != "mesh":
+        raise PovlensError(f"{outdir} was converted with the {plan.inputs.method} "
+                           f"method; it has no sample batches", "use 'povlens render-view'")
+    batches = plan.batches
     if not 0 <= batch < len(batches):
         raise PovlensError(f"batch {batch}: {outdir} has batches 0..{len(batches) - 1}")
     done = outdir / "samples" / f"batch_{batch:03d}.done"
@@ -364,7 +353,7 @@ def render_batch(outdir: str | os.PathLike, batch: int,
     if todo:
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)
-        _exposure(outdir, plan, lens, table)
+        exposure_for(outdir, plan, lens, table)
         timing = render_samples(plan, lens, table, outdir, batch, todo, in_flight=in_flight)
         write_text(outdir / "samples" / f"batch_{batch:03d}.timing.json",
                    json.dumps(timing) + "\n")
@@ -376,16 +365,17 @@ def render_view(outdir: str | os.PathLike, view: str) -> Path:
     """Render ``pinhole`` or ``focal-blur`` of a converted folder to ``view-<view>.exr``."""
     outdir = Path(outdir)
     plan = read_plan(outdir)
-    film = film_for(plan)
+    film = plan.film
     name = {"pinhole": "pinhole.pov", "focal-blur": "focal_blur.pov"}.get(view)
     if name is None:
-        raise PovlensError(f"--view {view}: unknown view", "use pinhole or focal-blur")
+        raise ParameterError("view", view, f"view={view!r}: unknown view",
+                             "use pinhole or focal-blur")
     out = outdir / f"view-{view}.exr"
     if not out.exists():
         povray_render(outdir / name, out, film.width_px, film.height_px,
                       threads=os.cpu_count() or 1,
-                      library_paths=[Path(plan["inputs"]["scene"]).parent])
-    if plan["inputs"]["method"] == view.replace("_", "-"):
+                      library_paths=[Path(plan.inputs.scene).parent])
+    if plan.inputs.method == view.replace("_", "-"):
         _finish_image(outdir, read_image(out)[..., :3])
     return out
 
@@ -409,21 +399,21 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
     outdir = Path(outdir)
     plan = read_plan(outdir)
     if vignetting is None:
-        vignetting = plan["inputs"].get("vignetting", True)
-    n = plan["inputs"]["samples"]
-    drop = plan["povray"]["drop_top_rows"]
+        vignetting = plan.inputs.vignetting
+    n = plan.inputs.samples
+    drop = plan.povray.drop_top_rows
     missing = [k for k in range(n) if not _sample_done(outdir, k)]
     if missing:
         raise PovlensError(f"{outdir}: samples {missing[:8]}{'...' if len(missing) > 8 else ''} "
                            f"are not rendered yet", "run 'povlens render' or 'make' in the folder")
     lens = lens_for(plan)
     table = pupil_table_for(outdir, plan, lens)
-    exposure = _exposure(outdir, plan, lens, table)
+    exposure = exposure_for(outdir, plan, lens, table)
     # Blocked samples (all rays blocked) are black with weight 0: they add nothing to
     # the sums but count in N_p.  Adaptive plans: sample k covers only its rows
     # (weight 0 elsewhere) and pixel p's N_p counts the samples covering its row.
     rendered = [k for k in range(n) if not _blocked_path(outdir, k).exists()]
-    film = film_for(plan)
+    film = plan.film
     n_p = samples_per_pixel(plan).astype(np.float64)
     if not rendered:
         image = np.zeros((film.height_px, film.width_px, 3))
@@ -441,14 +431,13 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
 
 
 def _progress(total: int, desc: str, quiet: bool):
-    from tqdm import tqdm
     return tqdm(total=total, desc=desc, unit="sample", disable=quiet or not sys.stderr.isatty(),
                 file=sys.stderr)
 
 
-def _mark_batches_done(outdir: Path, plan: dict) -> None:
+def _mark_batches_done(outdir: Path, plan: Plan) -> None:
     """Write ``batch_BBB.done`` (make's target) for each batch whose samples are done."""
-    for b, ks in enumerate(plan["batches"]):
+    for b, ks in enumerate(plan.batches):
         if all(_sample_done(outdir, k) for k in ks):
             write_text(outdir / "samples" / f"batch_{b:03d}.done", "".join(f"{k}\n" for k in ks))
 
@@ -461,21 +450,19 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
     (:func:`render_samples`: trace, write the mesh, start its POV-Ray process, go
     on), with up to ``in_flight`` POV-Ray processes at once (default
     :data:`POVRAY_IN_FLIGHT` per core, ``jobs`` cores, default all).  One process
-    with the lens and pupil table in memory is faster here than a worker process
-    per batch (2 cores; paper.pov, dgauss.50mm, 160x120: N = 8 1.40 s against
-    1.98-2.14 s, N = 32 3.52-3.55 s against 4.32-4.38 s; 480x360 N = 16 14.1-14.5 s
-    against 15.9 s): a worker's Python start-up costs more than the tracing it
-    would share.  ``make -jN`` in the folder renders its batches in parallel
-    processes (``povlens render-batch``)."""
+    with the lens and pupil table in memory is faster than a worker process per
+    batch: a worker's Python start-up costs more than the tracing it would share
+    (docs/decisions/planning.md).  ``make -jN`` in the folder renders its batches
+    in parallel processes (``povlens render-batch``)."""
     outdir = Path(outdir)
     plan = read_plan(outdir)
-    method = plan["inputs"]["method"]
+    method = plan.inputs.method
     if method != "mesh":
         render_view(outdir, method)
         return outdir / "image.exr"
     jobs = jobs or os.cpu_count() or 1
     in_flight = in_flight or POVRAY_IN_FLIGHT * jobs
-    todo = [k for k in range(plan["inputs"]["samples"]) if not _sample_done(outdir, k)]
+    todo = [k for k in range(plan.inputs.samples) if not _sample_done(outdir, k)]
     if todo:
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)
@@ -484,7 +471,7 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
             yield from todo
             # every sample is written and its POV-Ray started: the composite's
             # exposure is computed while they run (not after)
-            _exposure(outdir, plan, lens, table)
+            exposure_for(outdir, plan, lens, table)
 
         with _progress(len(todo), "lens samples", quiet) as bar:
             timing = render_samples(plan, lens, table, outdir, 0, samples(),
@@ -495,24 +482,23 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
     return outdir / "image.exr"
 
 
-class _EarlyRender:
+class EarlyRender:
     """Lens samples rendered in a thread of this process while
-    :func:`povlens.convert.convert` goes on (its ``render_early``): those of a
+    :func:`povlens.plan.convert.convert` goes on (its ``render_early``): those of a
     provisional plan at first, then, after :meth:`extend`, those the final plan
     adds, without draining the POV-Ray pipeline in between.  The lens and pupil
     table are already in memory.  :meth:`wait` waits for the samples given so far
     and raises what the render raised; :meth:`cancel` stops it (what it finished
     stays)."""
 
-    def __init__(self, outdir: Path, plan: dict, lens, table, in_flight: int, quiet: bool):
-        import threading
+    def __init__(self, outdir: Path, plan: Plan, lens, table, in_flight: int, quiet: bool):
         self._outdir = Path(outdir)
         self._stop = threading.Event()
         self._more = threading.Condition()
         self._closed = False
         self._error: BaseException | None = None
-        self._plans = {k: plan for k in range(plan["inputs"]["samples"])}
-        self._todo = [k for k in range(plan["inputs"]["samples"])
+        self._plans = {k: plan for k in range(plan.inputs.samples)}
+        self._todo = [k for k in range(plan.inputs.samples)
                       if not _sample_done(self._outdir, k)]
         self._final = plan
         self._lens, self._table = lens, table
@@ -528,7 +514,7 @@ class _EarlyRender:
             if i >= len(self._todo) and not exposure_known and not self._stop.is_set():
                 # nothing to write until the decision adds samples: the composite's
                 # exposure is computed now, while POV-Ray runs, instead of after
-                _exposure(self._outdir, self._final, self._lens, self._table)
+                exposure_for(self._outdir, self._final, self._lens, self._table)
                 exposure_known = True
             with self._more:
                 while i >= len(self._todo) and not self._closed and not self._stop.is_set():
@@ -555,11 +541,11 @@ class _EarlyRender:
         finally:
             self._bar.close()
 
-    def extend(self, plan: dict) -> None:
+    def extend(self, plan: Plan) -> None:
         """Render also the samples ``plan`` (the final plan, more samples than the
         provisional one) adds."""
         with self._more:
-            new = [k for k in range(plan["inputs"]["samples"]) if k not in self._plans]
+            new = [k for k in range(plan.inputs.samples) if k not in self._plans]
             self._plans.update({k: plan for k in new})
             self._todo += [k for k in new if not _sample_done(self._outdir, k)]
             self._final = plan
@@ -582,24 +568,21 @@ class _EarlyRender:
         self._thread.join()
 
 
-def convert_and_render(opts, jobs: int | None = None, quiet: bool = False,
-                       on_plan=None) -> tuple[dict, Path]:
-    """What ``povlens render`` does: convert ``opts`` (a
-    :class:`povlens.convert.ConvertOptions`) and render the folder
+def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: bool = False,
+                       on_plan=None) -> tuple[Plan, Path]:
+    """What ``povlens render`` does: convert ``opts`` and render the folder
     (:func:`render_outdir`).
 
     With --method auto, the render auto is likely to choose starts while its depth
-    probe runs (``speculate`` of :func:`povlens.convert.convert`): the adaptive
+    probe runs (``speculate`` of :func:`povlens.plan.convert.convert`): the adaptive
     focal_blur view, or, when the lens alone rules out the views, the first lens
     samples of the mesh render (``render_early``).  ``on_plan(plan)`` is called
     between conversion and rendering.  Returns (plan, path of image.exr)."""
-    import dataclasses
-    from povlens.plan.convert import convert
     jobs = jobs or os.cpu_count() or 1
 
     def render_early(plan, lens, table):
-        return _EarlyRender(Path(opts.outdir), plan, lens, table, POVRAY_IN_FLIGHT * jobs,
-                            quiet)
+        return EarlyRender(Path(opts.outdir), plan, lens, table, POVRAY_IN_FLIGHT * jobs,
+                           quiet)
 
     plan = convert(dataclasses.replace(opts, speculate=True), render_early=render_early)
     if on_plan is not None:

@@ -2,7 +2,7 @@
 
 Pure functions: arrays in, dicts and arrays out (the ``povlens compare`` command
 does the reading and writing).  Images are ``(H, W, C)`` arrays as returned by
-:func:`povlens.images.read_image`, in *linear* light (EXR).
+:func:`povlens.util.images.read_image`, in *linear* light (EXR).
 
 Metrics are over the colour channels only: R, G, B (the first three channels;
 a single grey channel for 1- or 2-channel images; alpha is ignored), every

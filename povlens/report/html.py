@@ -9,7 +9,7 @@ For each folder made by ``povlens convert`` / ``povlens render`` the page shows
 * the exit pupil across the field (the pupil table's polygons at several film radii
   over the exactly traced pass region);
 * the focus made visible: the pinhole render with what lies within the thin-lens
-  depth of field tinted (distances from :mod:`povlens.depth_probe`);
+  depth of field tinted (distances from :mod:`povlens.plan.depth_probe`);
 * the renders side by side (pinhole, ``focal_blur``, and the exact mesh render when
   the folder has one), false-colour differences against the mesh render, an error
   table (RMSE, PSNR, mean and max error in linear light) and the render times;
@@ -30,18 +30,25 @@ import html
 import io
 import json
 import math
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from povlens.plan.convert import read_plan
 from povlens.errors import PovlensError
 from povlens.lens.frames import vertex_z_mm
-from povlens.util.files import write_text
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import LensPrescription, sag_mm
 from povlens.lens.tracer import trace_from_film
+from povlens.plan.depth_probe import axial_depth, probe_depth
+from povlens.plan.schema import Plan, read_plan
+from povlens.pupil.plot import plot_pupil_shapes
+from povlens.pupil.storage import cached_pupil_table
+from povlens.render.samples import composite_outdir, lens_for, render_view
+from povlens.report.compare import compare_arrays, difference_magnitude, false_colour
+from povlens.util.files import write_text
+from povlens.util.images import read_image
 
 __all__ = ["make_report", "surface_hits", "depth_of_field", "COC_PIXELS"]
 
@@ -126,25 +133,17 @@ def surface_hits(lens: LensPrescription, film_distance_mm: float, origin_mm, dir
 
     Returns (hits (n, S, 3) mm, camera frame, NaN where a ray never reaches the
     surface; result of the full trace).  Not a tracer of its own: the hit on
-    surface i is the exit point of the sub-lens made of rows i..S-1 traced with
-    :func:`povlens.tracer.trace_from_film`.  The sub-lens keeps the vertex
-    positions; its refractive indices are divided by the index in front of row i,
-    so that every index *ratio* (all Snell's law sees) is that of the full lens
-    and the sub-lens may start inside glass.
+    surface i is the exit point of the sub-lens made of rows i..S-1
+    (:meth:`povlens.lens.prescription.LensPrescription.sub_lens`) traced with
+    :func:`povlens.lens.tracer.trace_from_film`.
     """
     o = np.asarray(origin_mm, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(direction, dtype=np.float64).reshape(-1, 3)
     full = trace_from_film(lens, film_distance_mm, o, d)
     n_s = lens.n_surfaces
     hits = np.full((len(o), n_s, 3), np.nan)
-    n_before = lens.index_before
     for i in range(n_s):
-        sl = slice(i, None)
-        sub = lens.replace(radius_mm=lens.radius_mm[sl], thickness_mm=lens.thickness_mm[sl],
-                           index_after=lens.index_after[sl] / n_before[i],
-                           aperture_diameter_mm=lens.aperture_diameter_mm[sl],
-                           abbe_vd=lens.abbe_vd[sl], lines=lens.lines[i:])
-        r = trace_from_film(sub, film_distance_mm, o, d)
+        r = trace_from_film(lens.sub_lens(i), film_distance_mm, o, d)
         # The ray reaches surface i if the full trace blocked it nowhere behind i.
         reached = full.passed | (full.blocked_at < i)
         ok = r.passed & reached
@@ -236,7 +235,7 @@ def lens_figure(lens: LensPrescription, film_distance_mm: float, film_half_diago
 
 # ----- depth of field ----------------------------------------------------------------------
 
-def depth_of_field(plan: dict, coc_px: float = COC_PIXELS) -> tuple[float, float]:
+def depth_of_field(plan: Plan, coc_px: float = COC_PIXELS) -> tuple[float, float]:
     """(near, far) limits of the depth of field of the plan's equivalent thin lens,
     in scene units along the view direction from the camera location (= entrance
     pupil); far may be inf.
@@ -246,12 +245,12 @@ def depth_of_field(plan: dict, coc_px: float = COC_PIXELS) -> tuple[float, float
     gives near = A v s / (A v + c s) and far = A v s / (A v - c s) (inf when
     A v <= c s, beyond the hyperfocal distance), with c = ``coc_px`` pixels.
     """
-    tl = plan["thin_lens"]
-    A, v = tl["pupil_diameter_mm"], tl["image_distance_mm"]
-    c = coc_px * plan["film"]["pixel_pitch_mm"]
-    s = tl["focus_distance_mm"]
-    mpu = plan["mm_per_unit"]
-    if s is None:                                   # focused at infinity
+    tl = plan.thin_lens
+    A, v = tl.pupil_diameter_mm, tl.image_distance_mm
+    c = coc_px * plan.film.pixel_pitch_mm
+    s = tl.focus_distance_mm
+    mpu = plan.mm_per_unit
+    if math.isinf(s):                               # focused at infinity
         return A * v / c / mpu, math.inf
     near = A * v * s / (A * v + c * s)
     far = A * v * s / (A * v - c * s) if A * v > c * s else math.inf
@@ -262,11 +261,10 @@ def depth_of_field(plan: dict, coc_px: float = COC_PIXELS) -> tuple[float, float
 
 class _Folder:
     def __init__(self, outdir: Path, render_missing: bool):
-        from povlens.render.samples import film_for, lens_for
         self.dir = outdir
         self.plan = read_plan(outdir)
         self.lens = lens_for(self.plan)
-        self.film = film_for(self.plan)
+        self.film = self.plan.film
         self.p = paraxial_data(self.lens)
         self.render_missing = render_missing
         self.timings: list[tuple[str, float, str]] = []
@@ -274,10 +272,10 @@ class _Folder:
 
     # -- lens and paraxial data --
     def lens_section(self) -> str:
-        fd = self.plan["focus"]["film_distance_mm"]
+        fd = self.plan.focus.film_distance_mm
         fig = lens_figure(self.lens, fd, self.film.half_diagonal_mm,
                           f"{Path(self.lens.source).name} focused at "
-                          f"{self.plan['inputs']['focus']:g} {self.plan['inputs']['units']}")
+                          f"{self.plan.inputs.focus:g} {self.plan.inputs.units}")
         p = self.p
         rows = [
             ["effective focal length", _num(p.efl, ".4f", "mm")],
@@ -297,24 +295,25 @@ class _Folder:
              f"{_num(p.stop_diameter, '.4f', 'mm')}"],
             ["total track", _num(p.total_track, ".4f", "mm")],
         ]
-        f = self.plan["focus"]
-        tl = self.plan["thin_lens"]
-        units = self.plan["inputs"]["units"]
-        mpu = self.plan["mm_per_unit"]
+        f = self.plan.focus
+        tl = self.plan.thin_lens
+        units = self.plan.inputs.units
+        mpu = self.plan.mm_per_unit
         near, far = depth_of_field(self.plan)
         focus_rows = [
             ["focus (from the camera location)",
-             f"{_num(self.plan['inputs']['focus'], '.6g')} {_esc(units)}"],
-            ["film distance (rear vertex to film), real rays", _num(f["film_distance_mm"], ".5f", "mm")],
-            ["film distance, thick lens", _num(f["thick_lens_film_distance_mm"], ".5f", "mm")],
-            ["RMS spot at the focus", _num(f.get("rms_spot_mm"), ".3g", "mm")],
-            ["object plane, from the film", _num(f["object_distance_from_film_mm"], ".6g", "mm")],
+             f"{_num(self.plan.inputs.focus, '.6g')} {_esc(units)}"],
+            ["film distance (rear vertex to film), real rays",
+             _num(f.film_distance_mm, ".5f", "mm")],
+            ["film distance, thick lens", _num(f.thick_lens_film_distance_mm, ".5f", "mm")],
+            ["RMS spot at the focus", _num(f.rms_spot_mm, ".3g", "mm")],
+            ["object plane, from the film", _num(f.object_distance_from_film_mm, ".6g", "mm")],
             ["plane of focus of the equivalent thin lens (from the entrance pupil)",
-             _num(None if tl["focus_distance_mm"] is None else tl["focus_distance_mm"] / mpu,
+             _num(None if math.isinf(tl.focus_distance_mm) else tl.focus_distance_mm / mpu,
                   ".5g", units)],
             ["equivalent thin lens: image distance / pupil diameter",
-             f"{_num(tl['image_distance_mm'], '.4f', 'mm')} / "
-             f"{_num(tl['pupil_diameter_mm'], '.4f', 'mm')}"],
+             f"{_num(tl.image_distance_mm, '.4f', 'mm')} / "
+             f"{_num(tl.pupil_diameter_mm, '.4f', 'mm')}"],
             [f"depth of field (circle of confusion {COC_PIXELS:g} px)",
              f"{_num(near, '.4g')} to {_num(far, '.4g')} {_esc(units)}"],
             ["film", f"{self.film.width_mm:g} x {self.film.height_mm:g} mm, "
@@ -328,17 +327,12 @@ class _Folder:
 
     # -- exit pupil --
     def pupil_section(self) -> str:
-        from povlens.pupil.table import build_pupil_table, load_if_current, plot_pupil_shapes
-        fd = self.plan["focus"]["film_distance_mm"]
+        fd = self.plan.focus.film_distance_mm
         hd = self.film.half_diagonal_mm
-        path = self.dir / "pupil.npz"
-        table = load_if_current(path, self.lens, fd, hd) if path.exists() else None
-        if table is None:
-            t0 = time.perf_counter()
-            table = build_pupil_table(self.lens, fd, hd)
+        table, reused = cached_pupil_table(self.dir / "pupil.npz", self.lens, fd, hd, save=False)
+        if not reused:
             self.timings.append(("exit-pupil table (built for this report)",
-                                 time.perf_counter() - t0, ""))
-        import tempfile
+                                 table.stats["build_time_s"], ""))
         with tempfile.TemporaryDirectory(prefix=".report.", dir=self.dir) as tmp:
             png = plot_pupil_shapes(table, Path(tmp) / "pupil.png",
                                     film_radii=np.linspace(0.0, hd, 6), n_grid=96)
@@ -349,8 +343,6 @@ class _Folder:
 
     # -- renders --
     def _view(self, view: str) -> np.ndarray | None:
-        from povlens.util.images import read_image
-        from povlens.render.samples import render_view
         path = self.dir / f"view-{view}.exr"
         if not path.exists() and self.render_missing:
             t0 = time.perf_counter()
@@ -368,15 +360,13 @@ class _Folder:
     def _mesh(self) -> np.ndarray | None:
         """The mesh render, composited with its vignetting divided out (POV-Ray's pinhole
         and focal_blur cameras have none, so differences then show geometry and blur)."""
-        from povlens.util.images import read_image
-        from povlens.render.samples import composite_outdir
         path = self.dir / "image.exr"
-        if self.plan["inputs"]["method"] != "mesh" or not path.exists():
+        if self.plan.inputs.method != "mesh" or not path.exists():
             return None
         try:
             return composite_outdir(self.dir, vignetting=False, write=False)
         except PovlensError:  # samples gone: fall back to the image as composited
-            self.mesh_vignetting = self.plan["inputs"].get("vignetting", True)
+            self.mesh_vignetting = self.plan.inputs.vignetting
             return read_image(path)[..., :3].astype(np.float64)
 
     def renders_section(self) -> tuple[str, np.ndarray | None]:
@@ -397,7 +387,6 @@ class _Folder:
         return out, views["pinhole"]
 
     def _differences(self, ref: np.ndarray, others: dict) -> str:
-        from povlens.report.compare import compare_arrays, difference_magnitude, false_colour
         rows, cells, errs = [], [], {}
         for name, im in others.items():
             if im is None or im.shape != ref.shape:
@@ -451,8 +440,6 @@ class _Folder:
 
     # -- focus --
     def focus_section(self, pinhole: np.ndarray | None) -> str:
-        from povlens.report.compare import false_colour
-        from povlens.plan.depth_probe import axial_depth, probe_depth
         if pinhole is None:
             return "<h3>Depth of field</h3>" + _missing("depth of field", "no pinhole render")
         if not self.render_missing:
@@ -462,7 +449,7 @@ class _Folder:
             dist = probe_depth(self.dir)
         except PovlensError as e:
             return "<h3>Depth of field</h3>" + _missing("depth probe", e.message)
-        self.timings.append(("depth probe", time.perf_counter() - t0, "2 POV-Ray runs"))
+        self.timings.append(("depth probe", time.perf_counter() - t0, "3 POV-Ray runs"))
         z = axial_depth(self.plan, dist)
         near, far = depth_of_field(self.plan)
         inside = np.isfinite(z) & (z >= near) & (z <= far)
@@ -478,16 +465,16 @@ class _Folder:
             t = (logz - lo) / (hi - lo) if hi > lo else np.zeros_like(logz)
             dm, _ = false_colour(np.nan_to_num(t, nan=1.0), 1.0, "viridis_r")
             dm = np.where(np.isfinite(z)[..., None], dm, 0.0)
-            rng = f"{finite.min():.3g} (yellow) to {finite.max():.3g} (purple), log scale; black: nothing hit"
+            rng = f"{finite.min():.3g} (yellow) to {finite.max():.3g} (purple), log scale; black: nothing hit or no depth"
         else:
             dm, rng = np.zeros(z.shape + (3,)), "nothing hit"
-        units = _esc(self.plan["inputs"]["units"])
+        units = _esc(self.plan.inputs.units)
         frac = 100.0 * inside.mean()
         return ("<h3>Depth of field</h3>"
                 f"<p>Thin-lens depth of field for a circle of confusion of {COC_PIXELS:g} pixels: "
                 f"{_num(near, '.4g')} to {_num(far, '.4g')} {units} from the camera along the "
                 f"view direction; tinted green: {frac:.1f}% of the pixels.  Distances from "
-                f"the fog depth probe (povlens.depth_probe).</p><div class=\"row\">"
+                f"the light-fade depth probe (povlens.plan.depth_probe).</p><div class=\"row\">"
                 f"<figure>{_img(_array_uri(shown), 'depth of field', 'render')}"
                 f"<figcaption>in focus (green)</figcaption></figure>"
                 f"<figure>{_img(_array_uri(dm), 'depth map', 'render')}"
@@ -495,14 +482,14 @@ class _Folder:
 
     # -- model error --
     def model_error_section(self) -> str:
-        me = self.plan.get("model_error")
+        me = self.plan.model_error
         if not me:
             return _missing("thin-lens model error", "not in plan.json")
         plt = _plt()
         h = np.asarray(me["film_height_mm"], dtype=np.float64)
-        zc = self.plan["thin_lens"]["centre_z_mm"]
-        mpu = self.plan["mm_per_unit"]
-        units = self.plan["inputs"]["units"]
+        zc = self.plan.thin_lens.centre_z_mm
+        mpu = self.plan.mm_per_unit
+        units = self.plan.inputs.units
         depths = [(z - zc) / mpu for z in me["object_z_mm"]]
         panels = [("distortion_px", "distortion (px)"),
                   ("blur_size_error_px", "blur size error (px)"),
@@ -530,11 +517,11 @@ class _Folder:
                 + _table(["summary", "value"], summary))
 
     def html(self, anchor: str) -> str:
-        inp = self.plan["inputs"]
+        inp = self.plan.inputs
         head = (f'<section id="{anchor}"><h2>{_esc(self.dir)}</h2>'
-                f"<p>scene {_esc(inp['scene'])}, lens {_esc(inp['lens'])}, method "
-                f"{_esc(inp['method'])}, {inp['samples']} samples, {inp['width']} x "
-                f"{inp['height']} px</p>")
+                f"<p>scene {_esc(inp.scene)}, lens {_esc(inp.lens)}, method "
+                f"{_esc(inp.method)}, {inp.samples} samples, {inp.width} x "
+                f"{inp.height} px</p>")
         parts = [self.lens_section(), self.pupil_section()]
         renders, pinhole = self.renders_section()
         parts += [self.focus_section(pinhole), renders, self._times(),

@@ -61,9 +61,10 @@ def test_flat_refracting_face_is_not_an_aperture():
     ("10 2 0.8 5\n-10 0 1 5\n", 1, "below 1"),
     ("10 2 -1.5 5\n-10 0 1 5\n", 1, "below 1"),
     ("10 -2 1.5 5\n-10 0 1 5\n", 1, "negative"),
-    ("10 2 1.5 30\n-10 0 1 5\n", 1, "larger than the sphere"),
-    # biconvex caps cross: R 10 / -10, 1 mm thick, 16 mm clear aperture
-    ("10 1 1.5 16\n-10 0 1 16\n", 2, "cross inside their clear apertures"),
+    # apertures beyond the sphere or past where caps cross are clipped, not refused
+    # (tests/lens/test_published_lenses.py); caps crossing at the axis are refused
+    ("50 5 1.5 20\n-50 0 0 16\n-20 3 1.6 16\n-30 0 0 16\n", 3,
+     "cross inside their clear apertures"),
     ("10 2 1.5 8\n-10 0 1.5 8\n", 2, "film must be in air"),
 ])
 def test_bad_rows_name_the_line_and_reason(text, line, words):

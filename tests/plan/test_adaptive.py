@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.schema import PovraySettings
 from povlens.util.images import read_image
-from povlens.render.samples import (_row_args, composite_outdir, render_outdir, sample_rows,
+from povlens.render.samples import (film_row_args, composite_outdir, render_outdir, sample_rows,
                             samples_per_pixel)
 
 from conftest import ROOT
@@ -31,32 +32,32 @@ def opts(tmp_path, name, **kw):
 
 
 def test_row_args_map_film_rows_to_povray_rows():
-    plan = {"povray": {"drop_top_rows": 1, "render_height": 37}, "film": {"height_px": 36}}
-    assert _row_args(plan, None) == ["+SR2"]                    # the 3.7.0.x extra top row
-    assert _row_args(plan, (8, 24)) == ["+SR10", "+ER25"]       # output rows 9..24 (0-based)
-    assert _row_args(plan, (0, 1)) == ["+SR2", "+ER2"]
-    plan = {"povray": {"drop_top_rows": 0, "render_height": 36}, "film": {"height_px": 36}}
-    assert _row_args(plan, None) == []
-    assert _row_args(plan, (0, 1)) == [f"+ER{1.5 / 36:.9f}"]    # 1 would mean "all rows"
-    assert _row_args(plan, (16, 36)) == ["+SR17"]
+    pv = PovraySettings(version="3.7.0.10", render_width=48, render_height=37, drop_top_rows=1)
+    assert film_row_args(pv, (0, 36)) == ["+SR2"]                   # the 3.7.0.x extra top row
+    assert film_row_args(pv, (8, 24)) == ["+SR10", "+ER25"]         # output rows 9..24 (0-based)
+    assert film_row_args(pv, (0, 1)) == ["+SR2", "+ER2"]
+    pv = PovraySettings(version="3.8.0", render_width=48, render_height=36, drop_top_rows=0)
+    assert film_row_args(pv, (0, 36)) == []
+    assert film_row_args(pv, (0, 1)) == [f"+ER{1.5 / 36:.9f}"]      # 1 would mean "all rows"
+    assert film_row_args(pv, (16, 36)) == ["+SR17"]
 
 
 def test_adaptive_plan_has_fewer_pixel_samples_and_correct_counts(tmp_path):
     plan = convert(opts(tmp_path, "a"))
-    a = plan["adaptive"]
-    n = plan["inputs"]["samples"]
-    assert n == max(a["band_samples"])
-    assert len(set(a["band_samples"])) > 1, a
-    assert a["pixel_samples"] < a["uniform_pixel_samples"]
+    a = plan.adaptive
+    n = plan.inputs.samples
+    assert n == max(a.band_samples)
+    assert len(set(a.band_samples)) > 1, a
+    assert a.pixel_samples < a.uniform_pixel_samples
     # every sample in exactly one batch; samples below n_min render whole frames
-    assert sorted(k for b in plan["batches"] for k in b) == list(range(n))
-    for k in range(a["n_min"]):
+    assert sorted(k for b in plan.batches for k in b) == list(range(n))
+    for k in range(a.n_min):
         assert sample_rows(plan, k) == (0, 36)
     # N_p of a row is the samples its band needs
     n_p = samples_per_pixel(plan)
-    for j, need in enumerate(a["band_samples"]):
+    for j, need in enumerate(a.band_samples):
         assert np.all(n_p[j * 8:(j + 1) * 8] >= need)
-    assert n_p.sum() * 48 == a["pixel_samples"]
+    assert n_p.sum() * 48 == a.pixel_samples
     # re-converting with the same inputs keeps the plan (rendered samples are kept)
     before = (tmp_path / "a" / "plan.json").read_text()
     convert(opts(tmp_path, "a"))
@@ -69,10 +70,10 @@ def _rmse(a, b):
 
 def test_adaptive_render_matches_uniform_and_resumes(tmp_path):
     plan = convert(opts(tmp_path, "a"))
-    n = plan["inputs"]["samples"]
+    n = plan.inputs.samples
     render_outdir(tmp_path / "a", jobs=2, quiet=True)
     adaptive = read_image(tmp_path / "a" / "image.exr")[..., :3].astype(np.float64)
-    rows = plan["sample_rows"]
+    rows = plan.sample_rows
     w = read_image(tmp_path / "a" / "samples" / f"sample_{n - 1:04d}.weight.exr")[..., 0]
     r0, r1 = rows[n - 1]
     assert np.all(w[:r0] == 0) and np.all(w[r1:] == 0) and np.any(w[r0:r1] > 0)
@@ -137,17 +138,18 @@ def test_adaptive_bands_use_the_real_spot_where_it_is_larger_than_the_thin_lens_
     """The f/1 singlet focused at 2 m: its thin-lens blur at 2 m is 0, but its
     spherical aberration makes a spot of many pixels, so every band needs more
     than the floor (before: every band 8 where the decision wanted 256)."""
-    from povlens.plan.auto import adaptive_rows, real_blur_at, real_blur_model_error
-    from povlens.plan.convert import _make_plan
+    from povlens.plan.adaptive import adaptive_rows, real_blur_at, real_blur_model_error
+    from povlens.plan.fixed import make_plan_with_lens
     o = ConvertOptions(scene=str(SCENES / "paper.pov"), lens="singlet.pcx.25mm", focus=2.0,
                        outdir="unused", width=48, height=36, method="mesh", samples=256)
-    plan, lens, model, film = _make_plan(o)
+    plan, lens = make_plan_with_lens(o)
+    model, film = plan.thin_lens, plan.film
     axial = np.full((12, 16), 2000.0)                       # everything at the focus
     thin = adaptive_rows(model, axial, film, 256)
-    assert set(thin["band_samples"]) == {8}
+    assert set(thin.band_samples) == {8}
     err = real_blur_model_error(lens, plan, model, film, axial)
     spot = real_blur_at(err, model, axial)
     assert np.all(spot > 3.0)                               # px: far from sharp
     real = adaptive_rows(model, axial, film, 256, model_error=err)
-    assert min(real["band_samples"]) > 8
-    assert min(real["band_blur_px"]) == pytest.approx(float(spot.max()), rel=1e-9)
+    assert min(real.band_samples) > 8
+    assert min(real.band_blur_px) == pytest.approx(float(spot.max()), rel=1e-9)

@@ -8,9 +8,10 @@ import sys
 
 import pytest
 
-from povlens.plan.auto import MAX_SAMPLES, MIN_SAMPLES, decide, model_depths
-from povlens.plan.convert import ConvertOptions, _make_plan
-from povlens.thinlens.model import measure_model_error
+from povlens.plan.convert import ConvertOptions
+from povlens.plan.decision import MAX_SAMPLES, MIN_SAMPLES, decide, model_depths
+from povlens.plan.fixed import make_plan_with_lens
+from povlens.thinlens.model_error import measure_model_error
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenes" / "paper.pov")
@@ -19,12 +20,13 @@ INF = math.inf
 
 def _decide(lens, f_number, focus_m, near_m, far_m, w=48, h=36, **kw):
     """Decision for a depth range [near, far] (m from the entrance pupil), measured model error."""
-    plan, L, model, film = _make_plan(ConvertOptions(
+    plan, L = make_plan_with_lens(ConvertOptions(
         scene=PAPER, lens=lens, focus=focus_m, outdir="unused", f_number=f_number,
         width=w, height=h, method="mesh"))
+    model, film = plan.thin_lens, plan.film
     c = model.centre_z_mm
     nz, fz = c + 1000 * near_m, c + 1000 * far_m
-    err = measure_model_error(L, plan["focus"]["film_distance_mm"], model, film,
+    err = measure_model_error(L, plan.focus.film_distance_mm, model, film,
                               model_depths(model, nz, fz))
     return decide(near_z_mm=nz, far_z_mm=fz, model=model, model_error=err,
                   pixel_pitch_mm=film.pixel_pitch_mm, **kw)
@@ -32,29 +34,29 @@ def _decide(lens, f_number, focus_m, near_m, far_m, w=48, h=36, **kw):
 
 def test_tiny_stop_gives_pinhole():
     d = _decide("dgauss.50mm", 22, 3, 1, INF)
-    assert d["method"] == "pinhole" and d["samples"] == 1
-    assert d["numbers"]["max_model_blur_px"] < 0.5
-    assert d["reasons"][-1].startswith("-> pinhole")
+    assert d.method == "pinhole" and d.samples == 1
+    assert d.numbers["max_model_blur_px"] < 0.5
+    assert d.reasons[-1].startswith("-> pinhole")
 
 
 def test_slow_well_corrected_lens_with_deep_scene_gives_focal_blur():
     d = _decide("tessar.50mm", 8, 3, 0.7, INF, 96, 72)
-    n = d["numbers"]
+    n = d.numbers
     assert n["max_model_blur_px"] >= 0.5                  # too much blur for a pinhole
-    assert d["method"] == "focal-blur", d["reasons"]
-    assert MIN_SAMPLES <= d["samples"] <= MAX_SAMPLES
+    assert d.method == "focal-blur", d.reasons
+    assert MIN_SAMPLES <= d.samples <= MAX_SAMPLES
 
 
 def test_fast_vignetting_lens_gives_mesh_with_samples_growing_with_blur():
     far = _decide("dgauss.50mm", None, 3, 2, 5, 160, 120)
     near = _decide("dgauss.50mm", None, 3, 0.5, 5, 160, 120)
-    assert far["method"] == near["method"] == "mesh"
-    assert far["numbers"]["min_relative_illumination"] < 0.95
-    assert near["numbers"]["max_blur_px"] > far["numbers"]["max_blur_px"]
-    assert near["samples"] > far["samples"] >= MIN_SAMPLES
+    assert far.method == near.method == "mesh"
+    assert far.numbers["min_relative_illumination"] < 0.95
+    assert near.numbers["max_blur_px"] > far.numbers["max_blur_px"]
+    assert near.samples > far.samples >= MIN_SAMPLES
     # the same lens with vignetting not wanted is judged on its other deviations only
     loose = _decide("dgauss.50mm", None, 3, 0.5, 5, 160, 120, vignetting=False, tolerance_px=8)
-    assert loose["method"] == "focal-blur"
+    assert loose.method == "focal-blur"
 
 
 def test_plan_command_records_the_decision(tmp_path):
@@ -91,12 +93,12 @@ def test_auto_plan_numbers_equal_a_plan_of_the_chosen_method(tmp_path):
     from povlens.plan.convert import convert, make_plan
     opts = ConvertOptions(scene=PAPER, lens="dgauss.50mm", focus=4, outdir=str(tmp_path / "a"),
                           width=40, height=30, method="auto")
-    plan = convert(opts)
+    plan = convert(opts).to_dict()
     d = plan.pop("decision")
     for k in ("requested_method", "tolerance_px", "auto_samples"):
         plan["inputs"].pop(k)
     again = make_plan(dataclasses.replace(opts, outdir=str(tmp_path / "b"), method=d["method"],
-                                          samples=d["samples"]))
+                                          samples=d["samples"])).to_dict()
     assert json.dumps(plan, sort_keys=True) == json.dumps(again, sort_keys=True)
     assert (tmp_path / "a" / "pupil.npz").is_file() and not list((tmp_path / "a").glob(".probe.*"))
 
@@ -115,7 +117,7 @@ def test_speculative_focal_blur_is_the_final_view(tmp_path):
                 width=48, height=36, method="auto")
     spec = tmp_path / "spec"
     plan = convert(ConvertOptions(outdir=str(spec), speculate=True, **base))
-    assert plan["inputs"]["method"] == "focal-blur"
+    assert plan.inputs.method == "focal-blur"
     assert (spec / "view-focal-blur.exr").exists()          # rendered during convert
     assert "blur_samples 32, 256" in (spec / "focal_blur.pov").read_text()
     assert not list(spec.glob(".speculative*")) and not list(spec.glob(".*.tmp*"))
@@ -140,7 +142,7 @@ def test_no_speculative_render_when_the_lens_vignettes(tmp_path):
     plan = convert(ConvertOptions(scene=str(root / "scenes" / "paper.pov"), lens="dgauss.50mm",
                                   focus=4.0, width=48, height=36, method="auto", speculate=True,
                                   outdir=str(out)))
-    assert plan["inputs"]["method"] == "mesh"
+    assert plan.inputs.method == "mesh"
     assert not (out / "view-focal-blur.exr").exists()
     assert not list(out.glob(".speculative*"))
 
@@ -149,7 +151,7 @@ def test_shape_error_is_how_far_the_long_axis_reaches_beyond_the_equivalent_disc
     """Sampled uniform ellipses: the long-axis extent (4 sqrt(l_max)) minus the
     diameter of the disc of the same RMS radius (2 sqrt(2) rho) is the formula."""
     import numpy as np
-    from povlens.plan.auto import shape_error_px
+    from povlens.plan.decision import shape_error_px
     rng = np.random.default_rng(1)
     u = rng.random(400_000)
     t = rng.random(400_000) * 2 * np.pi
@@ -170,7 +172,7 @@ def test_shape_error_is_how_far_the_long_axis_reaches_beyond_the_equivalent_disc
 
 def test_vignetting_and_shift_rmse_on_simple_images():
     import numpy as np
-    from povlens.plan.auto import shift_rmse, vignetting_rmse
+    from povlens.plan.decision import shift_rmse, vignetting_rmse
     img = np.ones((10, 20, 3))
     ri = np.full((10, 20), 0.8)
     assert vignetting_rmse(img, ri) == pytest.approx(0.2)
@@ -199,9 +201,9 @@ def test_probe_skips_the_view_when_the_vignetting_is_not_wanted(tmp_path):
         opts = ConvertOptions(scene=PAPER, lens="cooke.triplet.50mm", focus=4.0,
                               outdir=str(out), width=96, height=72, method="mesh",
                               vignetting=wanted)
-        plan, L, model, film = _make_plan(opts)
-        probe = start_depth_probe(opts, film, plan)
-        assert ("view" in probe._jobs) is wanted
+        plan = make_plan_with_lens(opts)[0]
+        probe = start_depth_probe(opts, plan.film, plan)
+        assert ("view" in probe.renders) is wanted
         depths[wanted] = probe_axial_mm(probe)
         assert (probe.image is not None) is wanted
     np.testing.assert_array_equal(depths[True], depths[False])
@@ -212,24 +214,26 @@ def test_probe_renders_the_view_and_the_decision_judges_vignetting_by_it(tmp_pat
     whose corners lose 12 % (cooke.triplet.50mm) is a deviation on a bright scene
     and none on the same scene made dark at the edges."""
     import numpy as np
-    from povlens.plan.auto import (probe_image_error, probe_size, start_depth_probe)
+    from povlens.plan.auto import probe_size, start_depth_probe
+    from povlens.plan.decision import probe_image_error
     from povlens.util.images import read_image
     from povlens.pov.process import render
     out = tmp_path / "o"
     out.mkdir()
     opts = ConvertOptions(scene=PAPER, lens="cooke.triplet.50mm", focus=4.0, outdir=str(out),
                           width=96, height=72, method="mesh")
-    plan, L, model, film = _make_plan(opts)
+    plan = make_plan_with_lens(opts)[0]
+    model, film = plan.thin_lens, plan.film
     probe = start_depth_probe(opts, film, plan)
     probe.result()
     pw, ph = probe_size(film)
     assert probe.image.shape == (ph, pw, 3)
     (out / "pin.pov").write_text((ROOT / "scenes" / "paper.pov").read_text())
-    from povlens.plan.convert import _write_folder
-    _write_folder(out, plan)
+    from povlens.plan.render_folder import write_folder
+    write_folder(out, plan)
     ref = read_image(render(out / "pinhole.pov", out / "pin.exr", pw, ph))[..., :3]
     np.testing.assert_allclose(probe.image, ref, atol=2e-3)
-    e = plan["model_error"]
+    e = plan.model_error
     bright = probe_image_error(np.ones((ph, pw, 3)) + 0.01 * (np.arange(pw) % 2)[None, :, None],
                                film, e, 0.5)
     assert bright["vignetting_rmse"] > bright["shift_rmse"]     # flat bright: vignetting shows
@@ -241,12 +245,12 @@ def test_probe_renders_the_view_and_the_decision_judges_vignetting_by_it(tmp_pat
     near = model.centre_z_mm + 3000.0
     kw = dict(near_z_mm=near, far_z_mm=near + 10000.0, model=model, model_error=e,
               pixel_pitch_mm=film.pixel_pitch_mm)
-    assert "at least the" in " ".join(decide(**kw, image_error=bright)["reasons"])
-    assert "less than the" in " ".join(decide(**kw, image_error=dark)["reasons"])
+    assert "at least the" in " ".join(decide(**kw, image_error=bright).reasons)
+    assert "less than the" in " ".join(decide(**kw, image_error=dark).reasons)
 
 
 def test_sample_count_is_the_blur_rule_rounded_to_a_power_of_two():
-    from povlens.plan.auto import SAMPLE_K, samples_for_blur
+    from povlens.plan.decision import SAMPLE_K, samples_for_blur
     assert samples_for_blur(0.0) == MIN_SAMPLES
     assert samples_for_blur(math.inf) == MAX_SAMPLES and samples_for_blur(1e200) == MAX_SAMPLES
     for b in [0.3, 3.0, 3.6, 4.5, 5.0, 6.1, 7.3, 9.0, 12.0, 15.0, 17.9, 40.0]:
@@ -269,21 +273,21 @@ def test_vignetting_that_takes_most_of_the_budget_prefers_a_minimum_mesh():
     kw = dict(tolerance_px=0.5)
     low = _decide("cooke.triplet.50mm", None, 4, 4, 100, 160, 120,
                   image_error={"vignetting_rmse": 0.03, "shift_rmse": 0.1}, **kw)
-    assert low["method"] == "focal-blur", low["reasons"]
-    assert low["numbers"]["vignetting_floor_share"] == pytest.approx(0.3)
+    assert low.method == "focal-blur", low.reasons
+    assert low.numbers["vignetting_floor_share"] == pytest.approx(0.3)
     high = _decide("cooke.triplet.50mm", None, 4, 4, 100, 160, 120,
                    image_error={"vignetting_rmse": 0.07, "shift_rmse": 0.1}, **kw)
-    assert high["method"] == "mesh" and high["samples"] == MIN_SAMPLES, high["reasons"]
-    assert "uses 0.70 of it" in high["reasons"][-1]
+    assert high.method == "mesh" and high.samples == MIN_SAMPLES, high.reasons
+    assert "uses 0.70 of it" in high.reasons[-1]
     # without vignetting wanted there is no floor
     free = _decide("cooke.triplet.50mm", None, 4, 4, 100, 160, 120, vignetting=False,
                    image_error={"vignetting_rmse": 0.07, "shift_rmse": 0.1}, **kw)
-    assert free["method"] == "focal-blur"
+    assert free.method == "focal-blur"
     # a blur that needs more than the minimum count keeps focal_blur (near 1 m, 4.4 px
     # at 320x240; a 1 px tolerance keeps the thin lens within the budget there)
     deep = _decide("cooke.triplet.50mm", None, 4, 1, 100, 320, 240, tolerance_px=1.0,
                    image_error={"vignetting_rmse": 0.07, "shift_rmse": 0.1})
-    assert deep["numbers"]["max_blur_px"] > 4 and deep["method"] == "focal-blur", deep["reasons"]
+    assert deep.numbers["max_blur_px"] > 4 and deep.method == "focal-blur", deep.reasons
 
 
 @pytest.mark.parametrize("lens, guess", [("dgauss.50mm", "mesh"), ("fisheye.10mm", "mesh"),
@@ -291,7 +295,8 @@ def test_vignetting_that_takes_most_of_the_budget_prefers_a_minimum_mesh():
                                          ("tessar.50mm", "either"),
                                          ("telephoto.250mm", "views"), ("wide", "views")])
 def test_early_guess_of_the_bundled_lenses(lens, guess):
-    from povlens.plan.convert import _early_guess
+    from povlens.plan.fixed import make_plan
+    from povlens.plan.speculative import early_guess
     opts = ConvertOptions(scene=PAPER, lens=lens, focus=4.0, outdir="unused", method="mesh")
-    plan = _make_plan(opts)[0]
-    assert _early_guess(opts, plan) == guess
+    plan = make_plan(opts)
+    assert early_guess(opts, plan) == guess

@@ -18,7 +18,9 @@ import numpy as np
 import pytest
 
 from povlens.pov import process as povray
+from povlens.pov.executable import needs_row_workaround, povray_version
 from povlens.errors import PovlensError, UsageError
+from povlens.pov.sdl_text import read_template
 from povlens.util.images import read_image
 from povlens.pov.mesh import (
     default_sink_centre,
@@ -224,9 +226,9 @@ def test_camera_block_and_wrappers():
     with pytest.raises(UsageError, match="rays per pixel"):
         mesh_camera_block(["A"], [0, 0, 0], 2)
     text = mesh_wrapper("scene.pov", ["a.inc"], ["A"], [0, 0, 0], 1, sink_centre=[0, 0, -1e5])
-    assert text.count("#version 3.7;") == 2
     assert "assumed_gamma" not in text.split("#include")[0].replace("assumed_gamma is kept", "")
     assert text.index('#include "scene.pov"') < text.index('#include "a.inc"') < text.index("camera {")
+    assert _keeps_scene_version(text, before="sphere {")
     text = mesh_wrapper("s.pov", ["a.inc"], ["A"], [0, 0, 0], 1, sink_centre=[0, 0, -1e5], assumed_gamma=1.0)
     assert text.index("global_settings { assumed_gamma 1 }") < text.index('#include "s.pov"')
     fb = focal_blur_wrapper("s.pov", LOC, [0, 0, 2], [1.33, 0, 0], [0, 1, 0],
@@ -235,6 +237,24 @@ def test_camera_block_and_wrappers():
     assert "focal_point <0, 1.2, 3>" in fb
     pin = pinhole_wrapper("s.pov", LOC, [0, 0, 2], [1.33, 0, 0], [0, 1, 0])
     assert "aperture " not in pin.split("camera {")[1] and "direction <0, 0, 2>" in pin
+    assert _keeps_scene_version(fb) and _keeps_scene_version(pin)
+    batch = read_template("mesh_batch.pov.tmpl").substitute(
+        scene_include='"s.pov"', sink_centre="<0, 0, -1e5>", sink_radius="1")
+    assert _keeps_scene_version(batch, before="sphere {")
+
+
+def _keeps_scene_version(text, before="camera {"):
+    """No ``#version`` before the scene; after it, 3.7 only if the scene ended below
+    3.7, from ``before`` (povlens's first statement) to the end, where the scene's
+    version is restored (tests/pov/test_scene_version.py renders why)."""
+    head, tail = text.split("#include", 1)
+    save = "#declare PovlensSceneVersion = version;\n#if (PovlensSceneVersion < 3.7) #version 3.7; #end\n"
+    restore = "#if (PovlensSceneVersion < 3.7) #version PovlensSceneVersion; #end\n"
+    code = [ln for ln in tail.splitlines() if not ln.lstrip().startswith("//")]
+    return ("#version" not in "".join(ln for ln in head.splitlines() if not ln.startswith("//"))
+            and tail.index(save) < tail.index(before)
+            and tail.endswith(restore)
+            and sum("#version" in ln for ln in code) == 2)
 
 
 # ---------------------------------------------------------------------------
@@ -296,7 +316,7 @@ def test_pinhole_mesh_matches_perspective(scene, tmp_path):
     diff = np.abs(sunk - pin).max(axis=2)[~blocked]
     assert np.median(diff) == 0.0 and np.mean(diff > 1e-3) < 0.01
 
-    if povray.needs_row_workaround(povray.povray_version()):
+    if needs_row_workaround(povray_version()):
         # Without the workaround, 3.7.0.x shows face row j-1 in pixel row j.
         naive = read_image(povray.render(tmp_path / "Pin.pov", tmp_path / "naive.exr", w, h))
         assert np.abs(naive[1:] - mesh[:-1]).max() == 0.0

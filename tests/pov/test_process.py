@@ -1,4 +1,4 @@
-"""povlens.povray against the real POV-Ray (small images)."""
+"""povlens.pov.process and povlens.pov.executable against the real POV-Ray (small images)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 
+from povlens.pov import executable
 from povlens.pov import process as povray
 from povlens.errors import PovrayError, UsageError
 from povlens.util.images import read_image
@@ -35,13 +36,13 @@ def _leftovers(folder):
 
 
 def test_version_and_row_workaround():
-    v = povray.povray_version()
+    v = executable.povray_version()
     assert re.fullmatch(r"\d+(\.\d+)+", v)
-    assert povray.povray_version() is v  # cached
-    assert povray.needs_row_workaround("3.7.0.10")
-    assert povray.needs_row_workaround("3.7.0")
-    assert not povray.needs_row_workaround("3.7.1")
-    assert not povray.needs_row_workaround("3.8.0")
+    assert executable.povray_version() is v  # cached
+    assert executable.needs_row_workaround("3.7.0.10")
+    assert executable.needs_row_workaround("3.7.0")
+    assert not executable.needs_row_workaround("3.7.1")
+    assert not executable.needs_row_workaround("3.8.0")
 
 
 def test_render_exr(flat_scene, tmp_path):
@@ -75,6 +76,29 @@ def test_bad_subrectangle(flat_scene, tmp_path):
         povray.render(flat_scene, tmp_path / "x.exr", 16, 12, end_col=17)
 
 
+def test_pixel_ranges_are_written_as_pixel_numbers_never_as_fractions_of_one():
+    assert povray.pixel_range_args(None, None, 12) == []
+    assert povray.pixel_range_args(0, 12, 12, "col") == []
+    assert povray.pixel_range_args(1, 3, 12) == ["+SR2", "+ER3"]
+    assert povray.pixel_range_args(0, 1, 12) == [f"+ER{1.5 / 12:.9f}"]  # "+ER1" = all rows
+    assert povray.pixel_range_args(15, None, 16, "col") == ["+SC16"]
+    with pytest.raises(UsageError, match="start_row < end_row"):
+        povray.pixel_range_args(5, 5, 12)
+
+
+def test_one_command_line_for_every_render():
+    switches = povray.render_switches("out.png", 16, 12, threads=2, start_row=1,
+                                      library_paths=["/scenes"], extra_args=["Declare=K=1"])
+    assert switches == ["+FN", "+W16", "+H12", "-A", "+WT2", "+SR2", "+L/scenes", "Declare=K=1"]
+    assert povray.povray_command("povray", "a.pov", "out.png", switches, error_log="e.log") == [
+        "povray", "-D", "-V", "-GR", "-GS", "+GFe.log", "+Ia.pov", "+Oout.png", *switches]
+    assert "+GF" not in " ".join(povray.povray_command("povray", "a.pov", "b.exr", []))
+    with pytest.raises(UsageError, match="suffix"):
+        povray.render_switches("out.jpg", 16, 12)
+    with pytest.raises(UsageError, match="thread"):
+        povray.render_switches("out.exr", 16, 12, threads=0)
+
+
 def test_parse_error_carries_povray_message(tmp_path):
     bad = tmp_path / "bad.pov"
     bad.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 }\nlightsource { <1,1,1> rgb 1 }\n")
@@ -98,17 +122,17 @@ def test_missing_include_message(tmp_path):
 
 
 def test_missing_povray(monkeypatch, flat_scene, tmp_path):
-    monkeypatch.setenv(povray.ENV_VAR, str(tmp_path / "nowhere" / "povray"))
+    monkeypatch.setenv(executable.ENV_VAR, str(tmp_path / "nowhere" / "povray"))
     with pytest.raises(PovrayError) as info:
         povray.render(flat_scene, tmp_path / "x.exr", 8, 6)
-    assert povray.ENV_VAR in str(info.value)
+    assert executable.ENV_VAR in str(info.value)
     assert info.value.hint and "povray" in info.value.hint
-    with pytest.raises(PovrayError, match=povray.ENV_VAR):
-        povray.povray_version()
+    with pytest.raises(PovrayError, match=executable.ENV_VAR):
+        executable.povray_version()
 
 
 def test_missing_povray_on_path(monkeypatch, flat_scene, tmp_path):
-    monkeypatch.delenv(povray.ENV_VAR, raising=False)
+    monkeypatch.delenv(executable.ENV_VAR, raising=False)
     monkeypatch.setenv("PATH", str(tmp_path))
     with pytest.raises(PovrayError, match="not found"):
         povray.render(flat_scene, tmp_path / "x.exr", 8, 6)
@@ -151,7 +175,7 @@ def test_image_is_taken_when_written_not_at_process_exit(tmp_path):
     scene.write_text(FLAT + "sphere { 0, 1 pigment { checker rgb 1 rgb 0 scale 0.2 } "
                             "finish { ambient 1 diffuse 0 } }\n")
     out = tmp_path / "a.exr"
-    proc = subprocess.Popen([povray.find_povray(), "-D", "-V", "-GR", "-GS", f"+I{scene}",
+    proc = subprocess.Popen([executable.find_povray(), "-D", "-V", "-GR", "-GS", f"+I{scene}",
                              f"+O{out}", "+FE", "+W64", "+H48", "-A", "+WT1"],
                             cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     seen_while_running = False
@@ -177,7 +201,7 @@ def test_a_wrapper_script_is_never_judged_done_before_it_exits(tmp_path):
     scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
     out = tmp_path / "a.exr"
     wrapper = tmp_path / "wrap"
-    wrapper.write_text(f'#!/bin/sh\n"{povray.find_povray()}" "$@"\n'
+    wrapper.write_text(f'#!/bin/sh\n"{executable.find_povray()}" "$@"\n'
                        # shell builtins only: no child process while it works on
                        'i=0; while [ $i -lt 100000 ]; do i=$((i+1)); done\n'
                        f'echo done > "{tmp_path}/marker"\n')
@@ -211,9 +235,9 @@ def priority_by(request, monkeypatch):
     """Both ways start_render lowers priorities: a chrt / nice prefix, and the
     preexec_fn fallback where those programs are missing."""
     if request.param == "preexec_fn":
-        monkeypatch.setattr(povray, "_priority_tools", lambda: (None, None))
+        monkeypatch.setattr(povray, "priority_tools", lambda: (None, None))
     else:
-        assert all(povray._priority_tools()), "chrt and nice are on every Debian"
+        assert all(povray.priority_tools()), "chrt and nice are on every Debian"
     return request.param
 
 
@@ -253,23 +277,23 @@ def test_version_is_remembered_across_runs_and_asked_again_after_an_upgrade(tmp_
     binary = tmp_path / "povray"
     shutil.copy(real, binary)                          # an ELF binary we can touch
     calls = []
-    ask = povray._ask_version
-    monkeypatch.setattr(povray, "_ask_version", lambda exe: calls.append(exe) or ask(exe))
-    povray._version_of.cache_clear()
-    v = povray.povray_version(str(binary))
-    povray._version_of.cache_clear()
-    assert povray.povray_version(str(binary)) == v and len(calls) == 1
+    ask = executable.ask_povray_version
+    monkeypatch.setattr(executable, "ask_povray_version", lambda exe: calls.append(exe) or ask(exe))
+    executable.cached_povray_version.cache_clear()
+    v = executable.povray_version(str(binary))
+    executable.cached_povray_version.cache_clear()
+    assert executable.povray_version(str(binary)) == v and len(calls) == 1
     os.utime(binary, ns=(0, 10**18))                   # "upgraded"
-    povray._version_of.cache_clear()
-    assert povray.povray_version(str(binary)) == v and len(calls) == 2
+    executable.cached_povray_version.cache_clear()
+    assert executable.povray_version(str(binary)) == v and len(calls) == 2
     script = tmp_path / "wrap"
     script.write_text(f'#!/bin/sh\nexec "{real}" "$@"\n')
     script.chmod(0o755)
     for _ in range(2):
-        povray._version_of.cache_clear()
-        assert povray.povray_version(str(script)) == v
+        executable.cached_povray_version.cache_clear()
+        assert executable.povray_version(str(script)) == v
     assert len(calls) == 4
-    povray._version_of.cache_clear()
+    executable.cached_povray_version.cache_clear()
 
 
 def test_a_chrt_that_cannot_set_the_policy_is_not_used(tmp_path, monkeypatch):
@@ -281,9 +305,9 @@ def test_a_chrt_that_cannot_set_the_policy_is_not_used(tmp_path, monkeypatch):
     (fake / "chrt").write_text("#!/bin/sh\necho 'chrt: failed to set pid 0 policy' >&2\nexit 1\n")
     (fake / "chrt").chmod(0o755)
     monkeypatch.setenv("PATH", f"{fake}:{os.environ['PATH']}")
-    povray._priority_tools.cache_clear()
+    povray.priority_tools.cache_clear()
     try:
-        assert povray._priority_tools()[0] is None
+        assert povray.priority_tools()[0] is None
         scene = tmp_path / "s.pov"
         scene.write_text(FLAT + "sphere { 0, 1 pigment { rgb 1 } }\n")
         job = povray.start_render(scene, tmp_path / "a.exr", 16, 12, idle=True)
@@ -293,4 +317,4 @@ def test_a_chrt_that_cannot_set_the_policy_is_not_used(tmp_path, monkeypatch):
             job.wait()
         assert (tmp_path / "a.exr").exists()
     finally:
-        povray._priority_tools.cache_clear()
+        povray.priority_tools.cache_clear()

@@ -185,7 +185,7 @@ def test_unreadable_cameras_give_clear_errors(tmp_path, name, text, fragment):
     assert isinstance(err, PovlensError)
     assert fragment in str(err)
     assert f"{name}.pov" in str(err)
-    assert "--location" in err.hint and "--look-at" in err.hint and "--sky" in err.hint
+    assert "'location'" in err.hint and "'look_at'" in err.hint and "'sky'" in err.hint
 
 
 def test_missing_scene_file(tmp_path):

@@ -13,8 +13,10 @@ from povlens.errors import OpticsError, PovlensError, UsageError
 from povlens.lens.focus import thick_lens_film_distance_mm
 from povlens.lens.paraxial import paraxial_data, stopped_down
 from povlens.lens.prescription import read_lens
-from povlens.pupil.table import (LensSample, _Prober, build_pupil_table, load, load_if_current,
-                           sampling_plane_z_mm)
+from povlens.pupil.build import build_pupil_table, sampling_plane_z_mm
+from povlens.pupil.prober import PupilProber
+from povlens.pupil.sampler import LensSample
+from povlens.pupil.storage import load, load_if_current
 from povlens.pupil.baselines import NaiveRearElement, PbrtBoxes
 from povlens.pupil.sampling import sobol_points
 from povlens.lens.tracer import trace_from_film
@@ -36,7 +38,7 @@ def tables():
 def brute_force(table, r, n=300):
     """Plane points (rotated frame) of a dense grid over a disc that holds every ray
     that can pass, the pass mask, the grid and its cell area."""
-    pr = _Prober(table.lens, table.film_distance_mm, table.plane_z_mm)
+    pr = PupilProber(table.lens, table.film_distance_mm, table.plane_z_mm)
     dcx, dR = pr.domain(np.array([r]))
     g = (np.arange(n) + 0.5) / n * 2.0 - 1.0
     X, Y = np.meshgrid(dcx[0] + dR[0] * g, dR[0] * g)
@@ -286,7 +288,7 @@ def test_sampling_plane_choice():
     z, name = sampling_plane_z_mm(lens, fd)
     assert name == "exit-pupil" and z == pytest.approx(fd + 17.7714, abs=1e-3)
     assert sampling_plane_z_mm(lens, fd, "rear-vertex") == (fd, "rear-vertex")
-    with pytest.raises(UsageError, match="--plane"):
+    with pytest.raises(UsageError, match="plane='front'"):
         sampling_plane_z_mm(lens, fd, "front")
     rear = build_pupil_table(lens, fd, HALF_DIAGONAL, plane="rear-vertex")
     assert rear.plane_z_mm == fd
@@ -300,7 +302,7 @@ def test_bad_arguments_raise_usage_errors():
         build_pupil_table(lens, -1.0, 17.5)
     with pytest.raises(UsageError, match="film_half_diagonal_mm"):
         build_pupil_table(lens, 36.0, float("nan"))
-    with pytest.raises(UsageError, match="--tolerance"):
+    with pytest.raises(UsageError, match="tolerance=0.0"):
         build_pupil_table(lens, 36.0, 17.5, tolerance=0.0)
     t = build_pupil_table(lens, 36.3, 5.0, tolerance=0.05)
     with pytest.raises(ValueError):
@@ -387,7 +389,7 @@ def test_tiny_stops_are_found_and_contained(name, stop_mm):
     t = build_pupil_table(lens, fd, HALF_DIAGONAL)
     assert t.pass_fraction(np.array([0.0, 8.0, 16.0]), n_samples=512).fraction.min() > 0.95
     for r in (0.0, 9.0):
-        pr = _Prober(t.lens, t.film_distance_mm, t.plane_z_mm)
+        pr = PupilProber(t.lens, t.film_distance_mm, t.plane_z_mm)
         # a dense grid over the table's own region grown 3x: passing rays must be inside
         pts = t.region(r)
         c = pts.mean(axis=0)

@@ -7,7 +7,7 @@ from povlens.lens.film import Film
 from povlens.lens.focus import thick_lens_film_distance_mm
 from povlens.pupil.rays import ScenePlacement, sample_points, sample_rays
 from povlens.lens.prescription import read_lens
-from povlens.pupil.table import build_pupil_table
+from povlens.pupil.build import build_pupil_table
 from povlens.lens.reference_tracer import trace_ray_from_film
 
 

@@ -9,7 +9,8 @@ from povlens.errors import OpticsError, UsageError
 from povlens.lens.focus import thick_lens_film_distance_mm
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import read_lens
-from povlens.pupil.table import LensSample, build_pupil_table
+from povlens.pupil.build import build_pupil_table
+from povlens.pupil.sampler import LensSample
 from povlens.pupil.baselines import NaiveRearElement, radical_inverse
 from povlens.pupil.sampling import (cranley_patterson, exposure_normalisation, halton_points,
                               irradiance_factor, lens_points, pass_fraction, sobol_points,

@@ -49,7 +49,7 @@ def test_convert_writes_plan_wrappers_and_makefile(tmp_path):
     assert "#include" in (out / "focal_blur.pov").read_text()
     # the scene itself is untouched
     assert (SCENES / "paper.pov").read_bytes() == before
-    assert plan["focus"]["film_distance_mm"] > plan["lens"]["efl_mm"] * 0.7
+    assert plan.focus.film_distance_mm > plan.lens.efl_mm * 0.7
 
 
 def test_make_renders_and_a_second_make_does_nothing(tmp_path):
@@ -255,10 +255,10 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, f
     kw = dict(focus=focus, film_diagonal_mm=film_mm, batch_size=None)
     plan, _ = convert_and_render(opts(tmp_path, outdir=str(auto), method="auto",
                                       tolerance_px=tol, **kw), quiet=True)
-    assert plan["inputs"]["method"] == "mesh" and "provisional" not in plan["decision"]
-    assert any("while the depth probe ran" in r for r in plan["decision"]["reasons"])
-    assert plan["decision"]["reasons"][-1].startswith("-> mesh")      # the conclusion stays last
-    n = plan["inputs"]["samples"]
+    assert plan.inputs.method == "mesh" and not plan.decision.provisional
+    assert any("while the depth probe ran" in r for r in plan.decision.reasons)
+    assert plan.decision.reasons[-1].startswith("-> mesh")      # the conclusion stays last
+    n = plan.inputs.samples
     assert (n > 8) == (focus == 1.5)
     early = json.loads((auto / "samples" / "early.timing.json").read_text())
     assert early["samples"] == n                     # all of them, in the one pipeline
@@ -276,15 +276,15 @@ def test_a_wrong_guess_stops_the_early_samples_and_renders_the_decision(tmp_path
     """The guess that the lens rules out the views is forced for telephoto.250mm,
     which auto renders with focal_blur: the early samples are stopped and dropped,
     and the folder holds the focal_blur image."""
-    import povlens.plan.convert as conv
+    import povlens.plan.speculative as speculative
     from povlens.render.samples import convert_and_render
-    monkeypatch.setattr(conv, "_lens_rules_out_views", lambda opts, plan0: True)
+    monkeypatch.setattr(speculative, "lens_rules_out_views", lambda opts, plan0: True)
     out = tmp_path / "auto"
     plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto",
                                           lens="telephoto.250mm", batch_size=None), quiet=True)
-    assert plan["inputs"]["method"] == "focal-blur"
+    assert plan.inputs.method == "focal-blur"
     assert any("mesh render started while the probe ran was stopped" in r
-               for r in plan["decision"]["reasons"])
+               for r in plan.decision.reasons)
     assert image.exists() and read_image(image).shape[:2] == (36, 48)
     assert _processes_in(out / "samples") == []
     assert not list((out / "samples").glob("sample_*"))
@@ -298,15 +298,15 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
     povlens render starts the first lens samples and the focal_blur view at once;
     the decision keeps one and stops the other, and the folder is as a fixed
     render of the decided method leaves it."""
-    import povlens.plan.convert as conv
+    import povlens.plan.speculative as speculative
     from povlens.render.samples import convert_and_render
-    monkeypatch.setattr(conv, "_early_guess", lambda opts, plan0: "either")
+    monkeypatch.setattr(speculative, "early_guess", lambda opts, plan0: "either")
     out = tmp_path / "auto"
     plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto", lens=lens,
                                           batch_size=None), quiet=True)
-    assert plan["inputs"]["method"] == decided
-    reasons = " ".join(plan["decision"]["reasons"])
-    assert plan["decision"]["reasons"][-1].startswith("-> " + decided)
+    assert plan.inputs.method == decided
+    reasons = " ".join(plan.decision.reasons)
+    assert plan.decision.reasons[-1].startswith("-> " + decided)
     assert _processes_in(out / "samples") == [] and not list(out.glob(".speculative*"))
     if decided == "focal-blur":
         assert "mesh render started while the probe ran was stopped" in reasons
@@ -332,18 +332,18 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
         assert not (out / "view-focal-blur.exr").exists()
         fixed = tmp_path / "fixed"
         convert(opts(tmp_path, outdir=str(fixed), method="mesh", lens=lens,
-                     samples=plan["inputs"]["samples"], batch_size=None))
+                     samples=plan.inputs.samples, batch_size=None))
         render_outdir(fixed, quiet=True)
         np.testing.assert_array_equal(read_image(image), read_image(fixed / "image.exr"))
 
 
 def test_a_cancelled_early_render_leaves_no_povray_and_resumes(tmp_path):
-    from povlens.render.samples import _EarlyRender, lens_for, pupil_table_for
+    from povlens.render.samples import EarlyRender, lens_for, pupil_table_for
     out = tmp_path / "out"
     plan = convert(opts(tmp_path, samples=24, batch_size=None))
     lens = lens_for(plan)
     table = pupil_table_for(out, plan, lens)
-    early = _EarlyRender(out, plan, lens, table, in_flight=4, quiet=True)
+    early = EarlyRender(out, plan, lens, table, in_flight=4, quiet=True)
     import time
     t0 = time.monotonic()
     while not [f for f in (out / "samples").glob("sample_*.exr") if ".weight" not in f.name]:

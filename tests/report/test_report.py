@@ -1,4 +1,5 @@
-"""The depth probe (POV-Ray fog inverted to distances) and ``povlens report``."""
+"""The depth probe of a render folder (a light at the eye, with and without fade) and
+``povlens report``."""
 
 from __future__ import annotations
 
@@ -12,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from povlens.plan.convert import ConvertOptions, convert, read_plan
-from povlens.plan.depth_probe import axial_depth, distance_from_fog, probe_depth, ray_directions
-from povlens.errors import PovlensError
+from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.schema import read_plan
+from povlens.plan.depth_probe import FADE_POWER, axial_depth, distance_from_fade, probe_depth
+from povlens.plan.depth_probe import ray_directions
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -23,7 +25,7 @@ PLANE_SCENE = textwrap.dedent("""\
     global_settings { assumed_gamma 1.0 }
     camera { location <0, 0, 0> look_at <0, 0, 1> }
     light_source { <0, 5, -5> rgb 1 }
-    // Normal -z: the inside is z > 5, so the camera is outside (fog applies).
+    // Normal -z: the inside is z > 5, so the camera is outside.
     plane { -z, -5 pigment { checker rgb 0.9 rgb 0.1 } finish { reflection 0.5 } }
     sphere { <0.5, 0, 2>, 0.3 pigment { rgb <1, 0, 0> } finish { reflection { 0.8 metallic } } }
     """)
@@ -38,16 +40,15 @@ def _plane_folder(tmp_path: Path, scene: str = PLANE_SCENE) -> Path:
     return out
 
 
-def test_distance_from_fog_inverts_the_fog_model():
+def test_distance_from_fade_inverts_the_fade_model():
     D = 3.0
-    d = np.array([[0.1, 1.0, 3.0], [7.0, 15.0, math.inf]])
-    f = np.exp(-d / D)
-    colour = np.random.default_rng(1).uniform(0, 2, d.shape + (3,))
-    black = f[..., None] * colour
-    white = black + (1 - f)[..., None]
-    got = distance_from_fog(white, black, D)
-    assert np.allclose(got[np.isfinite(d)], d[np.isfinite(d)], rtol=1e-9)
-    assert np.isinf(got[1, 2])
+    d = np.array([[0.1, 1.0, 3.0], [7.0, 15.0, 150.0]])
+    colour = np.random.default_rng(1).uniform(0.1, 2, d.shape + (3,))
+    b0 = 0.5 * colour
+    b2 = b0 + 100 * colour
+    b1 = b0 + 100 * colour * (2 / (1 + (d / D) ** FADE_POWER))[..., None]
+    got = distance_from_fade(b0, b1, b2, D)
+    assert np.allclose(got, d, rtol=1e-9)
 
 
 def test_probe_depth_of_a_plane_and_a_mirror_ball(tmp_path):
@@ -67,11 +68,11 @@ def test_probe_depth_of_a_plane_and_a_mirror_ball(tmp_path):
     assert np.max(np.abs(d / expected - 1)) < 5e-3
     z = axial_depth(plan, d)
     assert np.allclose(z[disc <= 0], 5.0, rtol=5e-3)
-    assert (out / "depth_fog_white.pov").is_file() and (out / "depth_fog_black.pov").is_file()
+    assert all((out / f"depth_fade_{k}.pov").is_file() for k in ("b0", "b1", "b2"))
     assert not list(out.glob(".depth.*"))
 
 
-def test_probe_depth_background_is_inf_and_camera_inside_a_solid_is_reported(tmp_path):
+def test_probe_depth_background_is_inf_and_camera_inside_a_solid_is_measured(tmp_path):
     sky = PLANE_SCENE.replace("plane { -z, -5", "plane { y, -1")   # floor; sky above
     (tmp_path / "a").mkdir()
     out = _plane_folder(tmp_path / "a", sky)
@@ -86,8 +87,9 @@ def test_probe_depth_background_is_inf_and_camera_inside_a_solid_is_reported(tmp
     inside = PLANE_SCENE.replace("plane { -z, -5", "plane { z, 5")   # camera inside
     (tmp_path / "b").mkdir()
     out = _plane_folder(tmp_path / "b", inside)
-    with pytest.raises(PovlensError, match="inside"):
-        probe_depth(out)
+    d = probe_depth(out)                        # POV-Ray's fog would do nothing here
+    z = axial_depth(read_plan(out), d)
+    assert np.isfinite(d).all() and np.median(np.abs(z[z > 4.0] / 5.0 - 1)) < 2e-3
 
 
 # ----- povlens report --------------------------------------------------------------------
@@ -198,17 +200,17 @@ def test_surface_hits_lie_on_the_surfaces():
 
 def test_depth_of_field_limits_have_the_chosen_blur(rendered):
     plan = read_plan(rendered)
-    tl = plan["thin_lens"]
-    m = EquivalentThinLens(tl["centre_z_mm"], tl["image_distance_mm"], tl["pupil_diameter_mm"],
-                           tl["focus_z_mm"])
-    mpu, pitch = plan["mm_per_unit"], plan["film"]["pixel_pitch_mm"]
+    tl = plan.thin_lens
+    m = EquivalentThinLens(tl.centre_z_mm, tl.image_distance_mm, tl.pupil_diameter_mm,
+                           tl.focus_z_mm)
+    mpu, pitch = plan.mm_per_unit, plan.film.pixel_pitch_mm
     near, far = depth_of_field(plan, coc_px=0.2)
-    assert near < plan["inputs"]["focus"] < far < math.inf
-    blur = m.blur_diameter_mm(np.array([near, far]) * mpu + tl["centre_z_mm"])
+    assert near < plan.inputs.focus < far < math.inf
+    blur = m.blur_diameter_mm(np.array([near, far]) * mpu + tl.centre_z_mm)
     assert np.allclose(blur, 0.2 * pitch, rtol=1e-9)
     # 1.5 px of 0.875 mm: beyond the hyperfocal distance, far is infinite.
     near, far = depth_of_field(plan, coc_px=1.5)
     assert far == math.inf
-    assert np.isclose(m.blur_diameter_mm(np.array([near * mpu + tl["centre_z_mm"]]))[0],
+    assert np.isclose(m.blur_diameter_mm(np.array([near * mpu + tl.centre_z_mm]))[0],
                       1.5 * pitch, rtol=1e-9)
-    assert tl["pupil_diameter_mm"] * tl["image_distance_mm"] / tl["focus_distance_mm"] <= 1.5 * pitch
+    assert tl.pupil_diameter_mm * tl.image_distance_mm / tl.focus_distance_mm <= 1.5 * pitch

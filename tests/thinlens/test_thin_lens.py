@@ -5,8 +5,10 @@ from povlens.lens.film import Film
 from povlens.lens.focus import thick_lens_film_distance_mm
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import parse_lens_text, read_lens
-from povlens.pupil.table import build_pupil_table
-from povlens.thinlens.model import chief_rays, fit_thin_lens, measure_model_error
+from povlens.lens.chief_ray import chief_rays
+from povlens.pupil.build import build_pupil_table
+from povlens.thinlens.model import fit_thin_lens
+from povlens.thinlens.model_error import measure_model_error
 
 from conftest import LENS_DIR
 
@@ -76,7 +78,7 @@ def test_vignetting_from_the_pupil_table_does_not_depend_on_the_stop_size():
     """The bundle of a tiny stop's pupil is found around the real chief ray, and the
     relative illumination comes from the exact pupil table: f/22 and f/64 agree."""
     from povlens.lens.paraxial import stopped_down
-    from povlens.pupil.table import build_pupil_table
+    from povlens.pupil.build import build_pupil_table
     film = Film.from_diagonal(35.0, 80, 60)
     ri = []
     for fno in (22.0, 64.0):
@@ -95,7 +97,7 @@ def test_vignetting_from_the_pupil_table_does_not_depend_on_the_stop_size():
                                        "wide.22mm"])
 @pytest.mark.parametrize("with_table", [False, True])
 def test_vectorized_model_error_equals_the_bundle_by_bundle_reference(lens_name, with_table):
-    from povlens.thinlens.model import measure_model_error_reference
+    from povlens.thinlens.model_error import measure_model_error_reference
     lens = read_lens(lens_name)
     film = Film.from_diagonal(43.27, 96, 64)
     p = paraxial_data(lens)
@@ -116,7 +118,7 @@ def test_model_error_searches_the_chief_rays_once_per_lens_and_focus(monkeypatch
     """A second measurement (other depths) with the same lens object and film
     distance reuses the chief rays; another focus or another lens object (even an
     equal one) searches again, and the result equals a fresh measurement."""
-    import povlens.thinlens.model as tl
+    import povlens.thinlens.model_error as tl
     lens = read_lens("tessar.50mm")
     film = Film.from_diagonal(43.27, 96, 64)
     f = thick_lens_film_distance_mm(lens, 3000.0)
@@ -124,7 +126,7 @@ def test_model_error_searches_the_chief_rays_once_per_lens_and_focus(monkeypatch
     calls = []
     real = tl.chief_rays
     monkeypatch.setattr(tl, "chief_rays", lambda *a: calls.append(a) or real(*a))
-    tl._CHIEF_RAYS.clear()
+    tl.CHIEF_RAY_MEMO.clear()
     measure_model_error(lens, f, m, film, [m.centre_z_mm + 2000.0])
     again = measure_model_error(lens, f, m, film, [m.centre_z_mm + 500.0, 1e6])
     assert len(calls) == 1

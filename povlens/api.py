@@ -1,0 +1,217 @@
+"""The Python API: what a script or notebook calls.
+
+Each function here is a thin, documented entry into one pipeline stage; the command
+line (:mod:`povlens.cli`) is a layer over these.  Lengths on the lens side are
+millimetres; distances in the scene are scene units (``units`` says what one is).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from povlens.lens.focus import FocusResult, UNITS_MM, focus as focus_mm
+from povlens.lens.prescription import LensPrescription, read_lens as read_lens_file
+from povlens.plan.convert import convert as convert_options
+from povlens.plan.options import ConvertOptions
+from povlens.plan.schema import Plan
+
+__all__ = ["read_lens", "focus", "convert", "render", "composite", "compare", "RenderResult"]
+
+
+def read_lens(name_or_path: str | os.PathLike) -> LensPrescription:
+    """Read a lens prescription.
+
+    Parameters
+    ----------
+    name_or_path : str or path
+        A Kolb/pbrt lens file (tab-separated radius, thickness, index, aperture
+        diameter, optional Abbe number; millimetres), or the name of a bundled lens
+        such as ``"dgauss.50mm"``.
+
+    Returns
+    -------
+    LensPrescription
+        The surfaces from the scene side to the film side.
+
+    Raises
+    ------
+    povlens.errors.LensFileError
+        The file is missing or malformed; the message names the file and line.
+    """
+    return read_lens_file(name_or_path)
+
+
+def _as_lens(lens: LensPrescription | str | os.PathLike) -> LensPrescription:
+    return lens if isinstance(lens, LensPrescription) else read_lens(lens)
+
+
+def focus(lens: LensPrescription | str | os.PathLike, distance: float,
+          units: str = "mm") -> FocusResult:
+    """Focus ``lens`` on an object ``distance`` from the film.
+
+    Parameters
+    ----------
+    lens : LensPrescription, str or path
+        The lens, or a name or path for :func:`read_lens`.
+    distance : float
+        Object distance from the film plane, in ``units``; ``inf`` focuses at infinity.
+    units : {"mm", "cm", "m", "in"}
+        Unit of ``distance``.
+
+    Returns
+    -------
+    FocusResult
+        Film distances (rear vertex to film, mm) by the thick-lens equation and by
+        real rays, the RMS spot and the closest focus distance.
+    """
+    if units not in UNITS_MM:
+        from povlens.errors import ParameterError
+        raise ParameterError("units", units, f"units={units!r}: unknown unit",
+                             f"use one of {', '.join(sorted(UNITS_MM))}")
+    return focus_mm(_as_lens(lens), float(distance) * UNITS_MM[units])
+
+
+def _options(scene, lens, focus_distance, outdir, overrides: dict[str, Any]) -> ConvertOptions:
+    known = {f.name for f in dataclasses.fields(ConvertOptions)}
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        from povlens.errors import ParameterError
+        raise ParameterError(unknown[0], overrides[unknown[0]],
+                             f"{unknown[0]!r} is not an option of a conversion",
+                             f"known options: {', '.join(sorted(known))}")
+    return ConvertOptions(scene=str(scene), lens=str(lens),
+                          focus=None if focus_distance is None else float(focus_distance),
+                          outdir=str(outdir), **overrides)
+
+
+def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | os.PathLike,
+            focus: float | None = None, method: str = "auto", **options) -> Plan:
+    """Write a render folder for ``scene`` through ``lens`` (no rendering).
+
+    Parameters
+    ----------
+    scene : str or path
+        An ordinary POV-Ray scene; it is not modified.
+    lens : str or path
+        Lens name or file (see :func:`read_lens`).
+    outdir : str or path
+        The folder to write: ``plan.json``, POV-Ray wrappers, a ``Makefile``.
+    focus : float, optional
+        Distance from the camera location to the plane in focus, scene units.  None:
+        the scene camera's ``focal_point`` (with focal blur), else the distance to its
+        ``look_at``, else what the depth probe sees at the frame's centre, or at
+        output pixel ``focus_at=(column, row)`` (:mod:`povlens.plan.autofocus`);
+        ``plan.inputs.focus_from`` says which.
+    method : {"auto", "pinhole", "focal-blur", "mesh"}
+        How the lens is rendered; ``auto`` measures the scene and chooses.
+    **options
+        Any field of :class:`povlens.plan.options.ConvertOptions` (``samples``,
+        ``width``, ``height``, ``f_number``, ``units``, ``tolerance_px``, ...).
+
+    Returns
+    -------
+    Plan
+        The plan written to ``outdir/plan.json``.
+    """
+    return convert_options(_options(scene, lens, focus, outdir,
+                                    {"method": method, **options}))
+
+
+@dataclasses.dataclass(frozen=True)
+class RenderResult:
+    """What :func:`render` made: the plan and the images (linear EXR, sRGB PNG)."""
+
+    plan: Plan
+    image_exr: Path
+    image_png: Path
+
+
+def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | os.PathLike,
+           focus: float | None = None, method: str = "auto", samples: int | None = None,
+           width: int | None = None, height: int | None = None, jobs: int | None = None,
+           progress: bool = False, **options) -> RenderResult:
+    """Convert ``scene`` and render it through ``lens`` with POV-Ray.
+
+    Parameters are those of :func:`convert`, plus:
+
+    samples : int, optional
+        Lens samples per pixel; by default ``auto`` chooses, the fixed methods use 16.
+    width, height : int, optional
+        Image size in pixels (defaults of :class:`~povlens.plan.options.ConvertOptions`).
+    jobs : int, optional
+        POV-Ray processes in parallel (default: the number of cores).
+    progress : bool
+        Show a progress bar on stderr.
+
+    Returns
+    -------
+    RenderResult
+        The plan and the paths of ``image.exr`` (linear light) and ``image.png``.
+        An interrupted render resumes when called again with the same arguments.
+    """
+    from povlens.render.samples import convert_and_render
+    overrides = {"method": method, **options}
+    if samples is not None:
+        overrides.update(samples=int(samples), auto_samples=False)
+    if width is not None:
+        overrides["width"] = int(width)
+    if height is not None:
+        overrides["height"] = int(height)
+    plan, exr = convert_and_render(_options(scene, lens, focus, outdir, overrides),
+                                   jobs=jobs, quiet=not progress)
+    exr = Path(exr)
+    return RenderResult(plan, exr, exr.with_suffix(".png"))
+
+
+def composite(outdir: str | os.PathLike, vignetting: bool | None = None) -> np.ndarray:
+    """Combine a render folder's lens samples into ``image.exr`` and ``image.png``.
+
+    Parameters
+    ----------
+    outdir : str or path
+        A folder written by :func:`convert` and rendered (fully or in part).
+    vignetting : bool, optional
+        Keep the lens's vignetting (default: the plan's setting).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(H, W, 3)`` float64, linear light.
+    """
+    from povlens.render.samples import composite_outdir
+    return composite_outdir(outdir, vignetting=vignetting)
+
+
+def compare(a: str | os.PathLike | np.ndarray, b: str | os.PathLike | np.ndarray,
+            mask: str | os.PathLike | np.ndarray | None = None) -> dict:
+    """Error metrics of image ``b`` against image ``a`` in linear light.
+
+    Parameters
+    ----------
+    a, b : path or numpy.ndarray
+        Images of equal size: file paths (EXR, PNG, ... read by OpenImageIO) or
+        ``(H, W)`` / ``(H, W, C)`` arrays.
+    mask : path or numpy.ndarray, optional
+        ``(H, W)``: only pixels where it is non-zero count.
+
+    Returns
+    -------
+    dict
+        ``rmse``, ``psnr_db``, ``mean_abs_error``, ``max_abs_error`` and ``max_at``
+        (where the largest error is), ``pixels``, ``channels``, ``masked``.
+    """
+    from povlens.report.compare import compare_arrays
+    from povlens.util.images import read_image
+
+    def load(x):
+        return x if isinstance(x, np.ndarray) or x is None else read_image(x)
+
+    m = load(mask)
+    if m is not None and m.ndim == 3:
+        m = m[..., 0]
+    return compare_arrays(load(a), load(b), m)

@@ -1,0 +1,215 @@
+"""Focus from the scene: the focus distance when ``--focus`` is not given.
+
+:func:`resolve_focus`, first that applies:
+
+1. ``focus`` given: ``"option"``;
+2. ``focus_at`` (X, Y) given: what the depth probe sees at output pixel (X, Y)
+   (column X from the left, row Y from the top, 0-based, of the ``width`` x ``height``
+   image): ``"depth probe at X,Y"``;
+3. the scene camera's ``focal_point`` when it has focal blur (``aperture`` > 0): the
+   distance POV-Ray focuses at, |focal_point - location| (``"focal_point"``);
+4. the distance to ``look_at`` (the scene camera's, or ``--look-at``'s): ``"look_at"``;
+5. what the depth probe sees at the centre of the frame: ``"depth probe at centre"``.
+
+The probe (:mod:`povlens.plan.depth_probe`) renders only a :data:`WINDOW` x
+:data:`WINDOW` window of output pixels around the point, as a camera of its own whose
+rays are those of the plan's pinhole camera at those pixels (:func:`window_camera`):
+the point is measured at the output image's resolution for the cost of POV-Ray's
+start-up.  The focus is the median axial distance (along the viewing direction, as
+``focus`` is measured) of the window pixels on the surface under the point (within
+:data:`SAME_SURFACE` of its distance).  The point's own pixel must have a depth:
+background (nothing hit) or a surface without a measurable response (black, emissive,
+clear) is a :class:`~povlens.errors.ParameterError` saying so.
+
+The field of view depends on the focus (focus breathing), so pixel (X, Y) looks in a
+slightly different direction once the plan is focused: the probe is repeated with the
+camera of the focus found until the point moves by less than :data:`SHIFT_PX` and the
+distance is well inside the probe's fade range (at most :data:`MAX_ROUNDS` rounds;
+the frame's centre never moves, one round suffices).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+
+from povlens.errors import ParameterError
+from povlens.lens.film import Film
+from povlens.lens.focus import UNITS_MM
+from povlens.plan.depth_probe import ProbeView, ray_directions, start_probe
+from povlens.plan.fixed import PlanStart, camera_focus, start_plan
+from povlens.plan.options import ConvertOptions
+from povlens.plan.schema import PovrayCamera
+
+__all__ = ["WINDOW", "SAME_SURFACE", "SHIFT_PX", "MAX_ROUNDS", "FADE_RANGE", "resolve_focus",
+           "focus_point", "window_camera", "pixel_shift_px", "measure_focus"]
+
+#: Output pixels on a side of the probed window (odd: the point is its central pixel).
+WINDOW = 5
+#: Window pixels within this relative distance of the point's are on its surface.
+SAME_SURFACE = 0.1
+#: The probe is repeated until the point moves less than this with the new focus (px).
+SHIFT_PX = 0.5
+#: Most probe rounds of one focus measurement.
+MAX_ROUNDS = 4
+#: The probe's fade distance D resolves d / D in this range to about 0.2 %; outside it
+#: the probe is repeated with D = d.
+FADE_RANGE = (0.05, 20.0)
+#: The first round's focus (mm) when the camera gives none: a typical distance.
+_FIRST_FOCUS_MM = 5000.0
+
+
+def focus_point(opts: ConvertOptions) -> tuple[float, float, str]:
+    """Where to focus: (x, y) in output pixels (pixel (i, j) covers [i, i+1) x [j, j+1),
+    row 0 at the top) and the plan.json ``focus_from`` label.
+
+    ``opts.focus_at`` (X, Y) is the centre of pixel (X, Y); without it, the frame's
+    centre.  :class:`ParameterError` for a pixel outside the image.
+    """
+    w, h = int(opts.width), int(opts.height)
+    if opts.focus_at is None:
+        return w / 2.0, h / 2.0, "depth probe at centre"
+    try:
+        x, y = (int(v) for v in opts.focus_at)
+    except (TypeError, ValueError):
+        raise ParameterError("focus_at", opts.focus_at, f"focus_at={opts.focus_at!r}: not a "
+                             f"pixel", "give 'focus_at' as the column and row of an output "
+                             "pixel") from None
+    if not (0 <= x < w and 0 <= y < h):
+        raise ParameterError("focus_at", opts.focus_at,
+                             f"focus_at={x},{y}: outside the {w}x{h} image",
+                             f"give a column 0..{w - 1} and a row 0..{h - 1}")
+    return x + 0.5, y + 0.5, f"depth probe at {x},{y}"
+
+
+def window_camera(cam: PovrayCamera, film: Film, x: float, y: float,
+                  n: int = WINDOW) -> tuple[PovrayCamera, Film]:
+    """The camera (and film) whose n x n pixels are the output pixels centred at (x, y).
+
+    POV-Ray's pixel (i, j) of a W x H image looks along D + (u - 1/2) R + (1/2 - v) U,
+    u = (i + 1/2)/W, v = (j + 1/2)/H: a camera with direction D + (x/W - 1/2) R +
+    (1/2 - y/H) U, right R n/W and up U n/H shoots the same rays at its n x n pixels.
+    The film is the window's (mm), for :class:`~povlens.plan.depth_probe.ProbeView`.
+    """
+    D, R, U = (np.asarray(v, dtype=np.float64) for v in (cam.direction, cam.right, cam.up))
+    w, h = film.width_px, film.height_px
+    d = D + (x / w - 0.5) * R + (0.5 - y / h) * U
+    win = dataclasses.replace(cam, direction=tuple(d.tolist()),
+                              right=tuple((R * n / w).tolist()), up=tuple((U * n / h).tolist()))
+    return win, Film(film.width_mm * n / w, film.height_mm * n / h, n, n)
+
+
+def _pixel_direction(cam: PovrayCamera, film: Film, x: float, y: float) -> np.ndarray:
+    D, R, U = (np.asarray(v, dtype=np.float64) for v in (cam.direction, cam.right, cam.up))
+    d = D + (x / film.width_px - 0.5) * R + (0.5 - y / film.height_px) * U
+    return d / np.linalg.norm(d)
+
+
+def pixel_shift_px(a: PovrayCamera, b: PovrayCamera, film: Film, x: float, y: float) -> float:
+    """How far (output pixels, in ``a``'s image) the point (x, y) of camera ``b``
+    lies from the point (x, y) of camera ``a`` (same location, same axes)."""
+    v = _pixel_direction(b, film, x, y)
+    D, R, U = (np.asarray(t, dtype=np.float64) for t in (a.direction, a.right, a.up))
+    # v = s (D + u R + w U) with R, U orthogonal to D: solve in a's image plane
+    s = (D @ D) / (v @ D)
+    p = s * v - D
+    u = (p @ R) / (R @ R)
+    w = (p @ U) / (U @ U)
+    return float(math.hypot((u + 0.5) * film.width_px - x, (0.5 - w) * film.height_px - y))
+
+
+def _probe_window(opts: ConvertOptions, st: PlanStart, x: float, y: float,
+                  fade: float) -> tuple[np.ndarray, ProbeView]:
+    """Axial distances (WINDOW, WINDOW) along ``st``'s axis of the window at (x, y)."""
+    cam, film = window_camera(st.povray_camera, st.film, x, y)
+    view = ProbeView(cam, film, st.mm_per_unit, str(Path(opts.scene).resolve()), fade)
+    out = Path(opts.outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    d = start_probe(view, out, fade_distance=fade, keep_wrappers=False, prefix=".focus.",
+                    label=str(opts.scene)).result()
+    fwd = np.asarray(st.forward, dtype=np.float64)
+    return d * (ray_directions(view) @ (fwd / np.linalg.norm(fwd))), view
+
+
+def _window_focus(axial: np.ndarray, label: str) -> tuple[float, dict]:
+    """The focus of a window of axial distances (its centre pixel's surface, median),
+    and the numbers behind it; :class:`ParameterError` if the centre has no depth."""
+    c = axial.shape[0] // 2
+    centre = float(axial[c, c])
+    if not math.isfinite(centre):
+        what = ("sees background (nothing: infinitely far)" if centre == math.inf else
+                "sees a surface whose distance the depth probe cannot measure (black, "
+                "emissive or clear: no response to light)")
+        name = "focus" if label.endswith("centre") else "focus_at"
+        raise ParameterError(name, None, f"focus from the {label}: the pixel {what}",
+                             "give 'focus' (scene units), or 'focus_at' on a lit surface")
+    same = axial[np.isfinite(axial) & (np.abs(axial - centre) <= SAME_SURFACE * centre)]
+    info = {"window_px": int(axial.shape[0]), "centre_distance": centre,
+            "surface_pixels": int(same.size),
+            "background_pixels": int(np.isposinf(axial).sum()),
+            "no_depth_pixels": int(np.isnan(axial).sum())}
+    return float(np.median(same)), info
+
+
+def measure_focus(opts: ConvertOptions) -> tuple[float, str, dict]:
+    """Focus on what the depth probe sees at the focus point (:func:`focus_point`).
+
+    Returns
+    -------
+    (focus, focus_from, info)
+        Axial distance in scene units, the label, and plan.json's
+        ``depth_probe.focus`` numbers (point, rounds, fade distance, window counts).
+    """
+    x, y, label = focus_point(opts)
+    got = camera_focus(opts)
+    from_mm = _FIRST_FOCUS_MM / _mm_per_unit(opts)
+    focus = got[0] if got is not None else from_mm
+    fade = focus
+    st = start_plan(dataclasses.replace(opts, focus=focus, focus_from=label))
+    for rounds in range(1, MAX_ROUNDS + 1):
+        axial, _ = _probe_window(opts, st, x, y, fade)
+        new, info = _window_focus(axial, label)
+        new_st = start_plan(dataclasses.replace(opts, focus=new, focus_from=label))
+        shift = pixel_shift_px(st.povray_camera, new_st.povray_camera, st.film, x, y)
+        in_range = FADE_RANGE[0] <= new / fade <= FADE_RANGE[1]
+        st, focus = new_st, new
+        if shift <= SHIFT_PX and in_range:
+            break
+        fade = new
+    info.update({"point_px": [x, y], "rounds": rounds, "fade_distance": fade,
+                 "focus": focus, "last_shift_px": shift})
+    return focus, label, info
+
+
+def _mm_per_unit(opts: ConvertOptions) -> float:
+    if opts.units not in UNITS_MM:
+        raise ParameterError("units", opts.units, f"units={opts.units!r}: unknown unit",
+                             "use one of mm, cm, m, in")
+    return UNITS_MM[opts.units]
+
+
+def resolve_focus(opts: ConvertOptions) -> tuple[ConvertOptions, dict | None]:
+    """``opts`` with ``focus`` and ``focus_from`` set (the module docstring's order).
+
+    Returns
+    -------
+    (ConvertOptions, dict or None)
+        The options, and the focus probe's numbers (None when no probe ran).
+
+    Raises :class:`ParameterError` for ``focus`` with ``focus_at``, a pixel outside the
+    image, or a point the probe finds no depth at.
+    """
+    if opts.focus is not None:
+        if opts.focus_at is not None:
+            raise ParameterError("focus_at", opts.focus_at, "'focus' and 'focus_at' both given",
+                                 "give one of them")
+        return dataclasses.replace(opts, focus_from=opts.focus_from or "option"), None
+    if opts.focus_at is None:
+        got = camera_focus(opts)
+        if got is not None:
+            return dataclasses.replace(opts, focus=got[0], focus_from=got[1]), None
+    focus, label, info = measure_focus(opts)
+    return dataclasses.replace(opts, focus=focus, focus_from=label), info

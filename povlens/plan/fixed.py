@@ -1,0 +1,385 @@
+"""The plan of a conversion with a given method (pinhole, focal-blur or mesh).
+
+A plan is derived in two steps.  :func:`start_plan` validates the options and
+derives what does not depend on the method or the sample count: the focused
+lens, the film, the thin-lens model and POV-Ray's camera (cheap: no pupil
+table).  :func:`finish_plan` adds the exit-pupil table (kept in
+OUTDIR/pupil.npz), the model's measured error, POV-Ray's image size and the
+lens-sample batches.  ``--method auto`` (:mod:`povlens.plan.convert`) runs its
+depth probe between the two steps and finishes the plan of the method it chooses.
+
+Scene units: ``units`` says what one scene unit is (the lens is in mm).  The
+focus distance is measured from the camera ``location``, where the lens's
+entrance pupil is placed.  Without ``focus``, :func:`start_plan` takes it from the
+camera (:func:`camera_focus`); :mod:`povlens.plan.autofocus` measures it otherwise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from povlens.errors import ParameterError, UsageError
+from povlens.lens.film import Film
+from povlens.lens.focus import UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_mm
+from povlens.lens.paraxial import paraxial_data, stopped_down
+from povlens.lens.prescription import LensPrescription, read_lens
+from povlens.plan.options import METHODS, ConvertOptions
+from povlens.plan.schema import (CameraPlacement, FocusSolution, Inputs, LensSummary, Plan,
+                                 PovrayCamera, PovraySettings)
+from povlens.pov.mesh import default_sink_centre, render_size
+from povlens.pov.executable import povray_version
+from povlens.pov.scene_camera import parse_scene_camera
+from povlens.pupil.storage import cached_pupil_table
+from povlens.thinlens.model import EquivalentThinLens, fit_thin_lens
+from povlens.thinlens.model_error import measure_model_error
+
+__all__ = ["PlanStart", "start_plan", "finish_plan", "make_plan", "make_plan_with_lens",
+           "camera_focus", "round_robin_batches", "run_in_background"]
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64)
+    n = np.linalg.norm(v)
+    if not (n > 0 and math.isfinite(n)):
+        raise UsageError(f"degenerate camera vector {v.tolist()}")
+    return v / n
+
+
+def _scene_camera(opts: ConvertOptions):
+    """The scene's camera, or None when the options give location and look_at."""
+    if opts.location is not None or opts.look_at is not None:
+        return None
+    return parse_scene_camera(opts.scene, opts.width, opts.height)
+
+
+def _camera_focus(opts: ConvertOptions, cam) -> tuple[float, str] | None:
+    """:func:`camera_focus` of an already read scene camera ``cam`` (None: the options')."""
+    if cam is None:
+        if opts.location is None or opts.look_at is None:
+            return None                   # _camera_basis says what is missing
+        d = float(np.linalg.norm(np.asarray(opts.look_at, float) - np.asarray(opts.location,
+                                                                                  float)))
+        return (d, "look_at") if d > 0 and math.isfinite(d) else None
+    fd = cam.focal_distance
+    if cam.aperture is not None and cam.aperture > 0 and fd is not None and 0 < fd < math.inf:
+        return float(fd), "focal_point"
+    if cam.look_at is not None:
+        d = float(np.linalg.norm(np.asarray(cam.look_at, float) - np.asarray(cam.location,
+                                                                               float)))
+        if d > 0 and math.isfinite(d):
+            return d, "look_at"
+    return None
+
+
+def camera_focus(opts: ConvertOptions) -> tuple[float, str] | None:
+    """The focus distance the camera gives, and where from (no rendering).
+
+    Parameters
+    ----------
+    opts : the options; their ``location`` / ``look_at`` if given, else the scene's
+        camera.
+
+    Returns
+    -------
+    (float, str) or None
+        Distance from the camera location in scene units and ``"focal_point"`` (the
+        scene camera's, when it has focal blur: ``aperture`` > 0; the distance
+        |focal_point - location| is what POV-Ray focuses at) or ``"look_at"`` (the
+        distance to it); None when the camera has neither.
+    """
+    return _camera_focus(opts, _scene_camera(opts))
+
+
+def _camera_basis(opts: ConvertOptions, cam):
+    """(location, right, up, forward, source) from options or the scene's camera
+    ``cam`` (:func:`_scene_camera`)."""
+    if cam is None:
+        if opts.location is None or opts.look_at is None:
+            missing = "location" if opts.location is None else "look_at"
+            raise ParameterError(missing, None, "'location' and 'look_at' go together",
+                                 "give both 'location' and 'look_at' (points x, y, z in "
+                                 "scene units)")
+        loc = np.asarray(opts.location, float)
+        fwd = _unit(np.asarray(opts.look_at, float) - loc)
+        right = np.cross(np.asarray(opts.sky, float), fwd)
+        if np.linalg.norm(right) < 1e-12:
+            raise ParameterError("sky", opts.sky, "'sky' is parallel to the view direction",
+                                 "choose another 'sky'")
+        right = _unit(right)
+        up = np.cross(fwd, right)
+        return loc, right, up, fwd, "command line"
+    if cam.projection != "perspective":
+        raise UsageError(f"{cam.source}: the scene's camera is {cam.projection}; povlens replaces "
+                         f"it with a lens and needs its position and orientation",
+                         "give 'location', 'look_at' and 'sky'")
+    return (np.asarray(cam.location, float), _unit(cam.right), _unit(cam.up),
+            _unit(cam.forward), cam.source)
+
+
+def _focus(lens, p, focus_from_pupil_mm: float, real: bool):
+    """Film distance f and object distance from the film D for a focus measured from
+    the entrance pupil.  The pupil moves with the lens, so iterate (3 steps converge
+    to 1e-12 relative: the dependence is through the small focus travel)."""
+    if math.isinf(focus_from_pupil_mm):
+        f = thick_lens_film_distance_mm(lens, math.inf, p)
+        d = math.inf
+    else:
+        f = p.bfl
+        for _ in range(6):
+            d = focus_from_pupil_mm + f + p.total_track - p.entrance_pupil_position
+            f = thick_lens_film_distance_mm(lens, d, p)
+    thick = f
+    spot = None
+    if real:
+        f, spot = exact_film_distance_mm(lens, d, p, thick)
+    return f, d, thick, spot
+
+
+@dataclasses.dataclass
+class PlanStart:
+    """The first part of a plan (:func:`start_plan`): validated inputs, the focused
+    lens, its thin-lens model and POV-Ray's pinhole camera; no pupil table and no
+    model error yet.  Nothing in it depends on the method or the sample count.
+
+    Distances in mm unless named; ``location`` / ``right`` / ``up`` / ``forward``
+    are the camera's world frame (shape (3,), scene units / unit vectors).
+    """
+
+    mm_per_unit: float
+    lens: LensPrescription
+    paraxial: object
+    film: Film
+    focus_mm: float
+    film_distance_mm: float
+    object_distance_mm: float
+    thick_lens_film_distance_mm: float
+    rms_spot_mm: float | None
+    thin_lens: EquivalentThinLens
+    location: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    forward: np.ndarray
+    camera_from: str
+    povray_camera: PovrayCamera
+    focus: float = math.nan            # the focus distance, scene units
+    focus_from: str = "option"         # where it came from (Inputs.focus_from)
+
+
+def _vector(a) -> tuple[float, float, float]:
+    return tuple(float(x) for x in np.asarray(a, dtype=np.float64).tolist())
+
+
+def start_plan(opts: ConvertOptions) -> PlanStart:
+    """Validate ``opts`` and derive the focused lens, film, thin lens and camera.
+
+    Parameters
+    ----------
+    opts : the conversion's options (any method but ``auto``'s decision is not made
+        here; ``method`` is only validated).  Without ``focus`` (and ``focus_at``), the
+        camera's (:func:`camera_focus`); what needs the depth probe is
+        :func:`povlens.plan.autofocus.resolve_focus`'s.
+
+    Returns
+    -------
+    PlanStart
+        Cheap to compute: no pupil table, no rendering.
+    """
+    if opts.method not in METHODS:
+        raise ParameterError("method", opts.method, f"method={opts.method!r}: unknown method",
+                             f"use one of {', '.join(METHODS)}")
+    if opts.units not in UNITS_MM:
+        raise ParameterError("units", opts.units, f"units={opts.units!r}: unknown unit",
+                             "use one of mm, cm, m, in")
+    if opts.samples < 1:
+        raise ParameterError("samples", opts.samples,
+                             f"samples={opts.samples}: must be at least 1")
+    if not Path(opts.scene).is_file():
+        raise UsageError(f"scene file {opts.scene} does not exist", "check the path")
+    mm_per_unit = UNITS_MM[opts.units]
+    lens = stopped_down(read_lens(opts.lens), stop_diameter_mm=opts.stop_diameter_mm,
+                        f_number=opts.f_number)
+    p = paraxial_data(lens)
+    if opts.film_size_mm is not None:
+        film = Film(float(opts.film_size_mm[0]), float(opts.film_size_mm[1]),
+                    int(opts.width), int(opts.height))
+    else:
+        film = Film.from_diagonal(opts.film_diagonal_mm, opts.width, opts.height)
+
+    cam = _scene_camera(opts)
+    focus, focus_from = _focus_of(opts, cam)
+    focus_mm = focus * mm_per_unit
+    film_d, object_d, thick_d, spot = _focus(lens, p, focus_mm, opts.real_focus)
+    model = fit_thin_lens(lens, film_d, object_d, film)
+    loc, right, up, fwd, cam_source = _camera_basis(opts, cam)
+    camera = PovrayCamera(
+        location=_vector(loc), direction=_vector(fwd),
+        right=_vector(right * film.width_mm / model.image_distance_mm),
+        up=_vector(up * film.height_mm / model.image_distance_mm),
+        aperture=2.0 * model.pupil_diameter_mm / mm_per_unit,
+        focal_distance=(model.focus_distance_mm / mm_per_unit
+                        if math.isfinite(model.focus_distance_mm) else 1e9),
+        hfov_deg=math.degrees(2 * math.atan(0.5 * film.width_mm / model.image_distance_mm)))
+    return PlanStart(mm_per_unit, lens, p, film, focus_mm, film_d, object_d, thick_d, spot,
+                     model, loc, right, up, fwd, cam_source, camera, focus, focus_from)
+
+
+def _focus_of(opts: ConvertOptions, cam) -> tuple[float, str]:
+    """The focus distance (scene units) and its source: the option, else the camera's
+    (:func:`camera_focus`); :class:`ParameterError` when neither gives one."""
+    if opts.focus is None:
+        got = None if opts.focus_at is not None else _camera_focus(opts, cam)
+        if got is None:
+            why = ("focus_at needs the depth probe" if opts.focus_at is not None else
+                   "no focus given, and the camera has neither focal_point (with "
+                   "focal_blur) nor look_at")
+            raise ParameterError("focus", None, why,
+                                 "give 'focus' (scene units), or convert with "
+                                 "povlens.plan.convert.convert, which measures it")
+        return got
+    if not (opts.focus > 0 and math.isfinite(opts.focus)):
+        raise ParameterError("focus", opts.focus,
+                             f"focus={opts.focus}: must be a positive distance in scene units")
+    return float(opts.focus), opts.focus_from or "option"
+
+
+def round_robin_batches(n_samples: int, batch_size: int | None = None) -> list[list[int]]:
+    """Lens samples 0..n-1 dealt round-robin to batches of at most ``batch_size``.
+
+    A batch is the work of one ``povlens render-batch`` (make runs them in
+    parallel); the default is one batch per core.  Round-robin spreads the
+    samples a smaller count renders first (0..n-1, the same for any count), and
+    adaptive plans' later samples, which render fewer rows, evenly over the
+    batches.
+
+    Returns
+    -------
+    list of list of int
+        Batch b holds samples b, b + nb, b + 2 nb, ... (nb batches).
+    """
+    bs = batch_size or math.ceil(n_samples / (os.cpu_count() or 1))
+    nb = math.ceil(n_samples / bs)
+    return [list(range(b, n_samples, nb)) for b in range(nb)]
+
+
+def _standard_depths_mm(model: EquivalentThinLens, object_d: float, efl_mm: float) -> list[float]:
+    """Camera-frame depths (mm) the model is checked at: half, once, twice and ten
+    times the focus distance (focus at infinity: 1, 10, 100 x 1000 EFL)."""
+    if math.isinf(object_d):
+        return [model.centre_z_mm + k * 1000.0 * efl_mm for k in (1, 10, 100)]
+    s = object_d - model.centre_z_mm
+    return [model.centre_z_mm + k * s for k in (0.5, 1.0, 2.0, 10.0)]
+
+
+def _inputs(opts: ConvertOptions, st: PlanStart) -> Inputs:
+    return Inputs(
+        scene=str(Path(opts.scene).resolve()), lens=st.lens.source,
+        lens_sha256=st.lens.sha256(), focus=st.focus, units=opts.units,
+        f_number=opts.f_number, stop_diameter_mm=opts.stop_diameter_mm,
+        film_diagonal_mm=opts.film_diagonal_mm,
+        film_size_mm=None if opts.film_size_mm is None else tuple(opts.film_size_mm),
+        width=opts.width, height=opts.height, method=opts.method, samples=opts.samples,
+        batch_size=opts.batch_size, seed=opts.seed, real_focus=opts.real_focus,
+        vignetting=opts.vignetting, jitter=opts.jitter, adaptive=bool(opts.adaptive),
+        camera_from=st.camera_from, focus_from=st.focus_from,
+        focus_at=None if opts.focus_at is None else tuple(int(v) for v in opts.focus_at))
+
+
+def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_error=None,
+                version: Callable[[], str] = povray_version):
+    """The plan of ``opts`` from :func:`start_plan`'s part.
+
+    Parameters
+    ----------
+    opts : the options ``st`` was started from, with a concrete method.
+    st : :func:`start_plan` of ``opts`` (or of options differing only in the method
+        and sample count).
+    pupil_table, model_error : already computed for the same lens, focus and film
+        (they do not depend on the method or the samples); default: the table of
+        OUTDIR/pupil.npz if current, else built (and saved there), and the model
+        error measured.
+    version : called for POV-Ray's version (a background lookup may be passed).
+
+    Returns
+    -------
+    (Plan, PupilTable)
+        The plan and the exit-pupil table it used.
+    """
+    lens, p, film, model = st.lens, st.paraxial, st.film, st.thin_lens
+    # pupil.rays loads scipy.stats (~0.4 s): not before the inputs are validated
+    from povlens.pupil.rays import ScenePlacement
+    placement = ScenePlacement.at_entrance_pupil(st.location, st.right, st.up, st.forward,
+                                                 model.centre_z_mm, st.mm_per_unit)
+    table = pupil_table
+    if table is None:  # exact vignetting; saved in OUTDIR for the render to reuse
+        table, _ = cached_pupil_table(Path(opts.outdir) / "pupil.npz", lens,
+                                      st.film_distance_mm, film.half_diagonal_mm,
+                                      save=Path(opts.outdir).is_dir())
+    if model_error is None:
+        depths = _standard_depths_mm(model, st.object_distance_mm, p.efl)
+        model_error = measure_model_error(lens, st.film_distance_mm, model, film, depths,
+                                          pupil_table=table)
+    version = version()
+    rw, rh, drop = render_size(film.width_px, film.height_px, version)
+    plan = Plan(
+        inputs=_inputs(opts, st),
+        lens=LensSummary(surfaces=int(lens.n_surfaces), stop_index=int(p.stop_index),
+                         stop_diameter_mm=float(lens.aperture_diameter_mm[p.stop_index]),
+                         efl_mm=p.efl, f_number=p.f_number,
+                         entrance_pupil_diameter_mm=p.entrance_pupil_diameter),
+        focus=FocusSolution(st.focus_mm, st.object_distance_mm, st.film_distance_mm,
+                            st.thick_lens_film_distance_mm, st.rms_spot_mm),
+        film=film, mm_per_unit=st.mm_per_unit,
+        placement=CameraPlacement(_vector(placement.film_centre), _vector(placement.right),
+                                  _vector(placement.up), _vector(placement.forward),
+                                  placement.mm_per_unit),
+        thin_lens=model, povray_camera=st.povray_camera, model_error=model_error,
+        povray=PovraySettings(version, rw, rh, drop),
+        sink_centre=_vector(default_sink_centre(st.location, st.forward)),
+        batches=round_robin_batches(opts.samples, opts.batch_size))
+    return plan, table
+
+
+def run_in_background(fn: Callable):
+    """Run ``fn()`` in a thread; returns a function that waits for its result (or
+    raises its exception)."""
+    pool = ThreadPoolExecutor(max_workers=1)
+    future = pool.submit(fn)
+    pool.shutdown(wait=False)
+    return future.result
+
+
+def make_plan_with_lens(opts: ConvertOptions) -> tuple[Plan, LensPrescription]:
+    """:func:`make_plan` and the stopped-down lens the plan was derived from."""
+    start = start_plan(opts)
+    # 'povray --version' (~0.2 s, idle) runs while the pupil table is built
+    plan, _ = finish_plan(opts, start, version=run_in_background(povray_version))
+    return plan, start.lens
+
+
+def make_plan(opts: ConvertOptions) -> Plan:
+    """Derive every number of a conversion with a given method.
+
+    Reads the inputs; its only output file is OUTDIR/pupil.npz (the exit-pupil
+    table, which the render reuses while current).  ``method="auto"`` needs
+    renders (a depth probe): use :func:`povlens.plan.convert.convert`.
+
+    Parameters
+    ----------
+    opts : the options, ``method`` one of pinhole, focal-blur, mesh.
+
+    Returns
+    -------
+    Plan
+    """
+    if opts.method == "auto":
+        raise ParameterError("method", opts.method, "make_plan: method='auto' is decided by "
+                             "convert() (it renders a depth probe)",
+                             "call convert(), or give a concrete method")
+    return make_plan_with_lens(opts)[0]

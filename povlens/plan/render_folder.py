@@ -1,0 +1,157 @@
+"""Writing a render folder from its plan: plan.json, POV-Ray wrappers, the Makefile.
+
+OUTDIR gets
+
+* ``plan.json`` (:func:`povlens.plan.schema.write_plan`);
+* ``pinhole.pov`` and ``focal_blur.pov``: wrappers that ``#include`` the scene and
+  declare their own camera last (POV-Ray uses the last camera);
+* for the mesh method, ``samples/batch_NNN.pov``: wrappers that render one lens
+  sample each per POV-Ray run (the sample's ray mesh is written just before,
+  :mod:`povlens.render.samples`);
+* ``Makefile``: ``make -C OUTDIR -j2`` renders and composites; a second ``make``
+  does nothing.
+
+Files whose text is unchanged are left alone (make compares modification
+times), and what an earlier plan rendered that the new one cannot use is removed.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import sys
+from pathlib import Path
+
+from povlens.errors import PovlensError
+from povlens.plan.schema import FocalBlurSettings, Plan, read_plan, write_plan
+from povlens.pov.mesh import SINK_RADIUS, focal_blur_wrapper, pinhole_wrapper
+from povlens.pov.sdl_text import pov_string, pov_vector, read_template
+from povlens.util.files import write_text
+
+__all__ = ["write_folder", "write_if_changed", "focal_blur_text", "blur_settings",
+           "stale_samples", "invalidate_outputs", "SAMPLE_INDEPENDENT_INPUTS"]
+
+#: Plan inputs that do not change what lens sample k renders: the sample count
+#: (scrambled-Sobol point k is the same for any count), how samples are batched,
+#: and how the method and count were chosen.  A change of these keeps rendered
+#: samples whose row range is unchanged.
+SAMPLE_INDEPENDENT_INPUTS = ("samples", "batch_size", "adaptive", "requested_method",
+                             "tolerance_px", "auto_samples")
+
+
+def write_if_changed(path: Path, text: str) -> None:
+    """Write atomically, but leave an identical file alone (make compares mtimes)."""
+    try:
+        if path.read_text() == text:
+            return
+    except OSError:
+        pass
+    write_text(path, text)
+
+
+def _scene_include(plan: Plan, outdir: Path) -> str:
+    return os.path.relpath(plan.inputs.scene, outdir)
+
+
+def blur_settings(plan: Plan, settings: FocalBlurSettings | None = None) -> dict:
+    """focal_blur sampling of a plan as :func:`povlens.pov.mesh.focal_blur_wrapper`
+    takes it: ``blur_samples`` min and max, and the confidence and variance of
+    POV-Ray's adaptive sampling.  ``settings`` (default: those --method auto chose,
+    unless ``--samples`` was given) replace the fixed ``samples, samples``."""
+    if settings is None and plan.decision is not None and plan.inputs.auto_samples is not False:
+        settings = plan.decision.focal_blur
+    if settings is not None:
+        return {"blur_samples": settings.min_samples, "max_blur_samples": settings.max_samples,
+                "confidence": settings.confidence, "variance": settings.variance}
+    n = int(plan.inputs.samples)
+    return {"blur_samples": n, "max_blur_samples": n, "confidence": None, "variance": None}
+
+
+def focal_blur_text(plan: Plan, outdir: Path, settings: FocalBlurSettings | None = None) -> str:
+    """The text of ``focal_blur.pov`` of ``plan`` in ``outdir`` (sampling:
+    :func:`blur_settings`)."""
+    cam = plan.povray_camera
+    return focal_blur_wrapper(
+        _scene_include(plan, outdir), cam.location, cam.direction, cam.right, cam.up,
+        aperture=cam.aperture, focal_distance=cam.focal_distance,
+        **blur_settings(plan, settings))
+
+
+def _batch_wrapper(plan: Plan, outdir: Path) -> str:
+    """Animation wrapper (templates/mesh_batch.pov.tmpl): frame k renders sample k."""
+    scene = os.path.relpath(plan.inputs.scene, outdir / "samples")
+    return read_template("mesh_batch.pov.tmpl").substitute(
+        scene_include=pov_string(scene), sink_centre=pov_vector(plan.sink_centre),
+        sink_radius=f"{SINK_RADIUS:.9g}")
+
+
+def _makefile(plan: Plan) -> str:
+    """The folder's Makefile (templates/Makefile.tmpl)."""
+    method = plan.inputs.method
+    if method == "mesh":
+        dones = " ".join(f"samples/batch_{b:03d}.done" for b in range(len(plan.batches)))
+        rules = (f"image.png: {dones}\n\t$(POVLENS) composite .\n\n"
+                 "samples/batch_%.done: plan.json\n\t$(POVLENS) render-batch . $*\n")
+    else:
+        wrapper = "pinhole.pov" if method == "pinhole" else "focal_blur.pov"
+        rules = f"image.png: plan.json {wrapper}\n\t$(POVLENS) render-view . --view {method}\n"
+    return read_template("Makefile.tmpl").substitute(
+        povlens=f"{shlex.quote(sys.executable)} -m povlens", rules=rules)
+
+
+def stale_samples(old: Plan, new: Plan) -> list[int] | None:
+    """Samples of the old plan that the new plan cannot reuse: ``None`` = all (an
+    input that changes every sample differs), else those whose rows changed or
+    that the new plan no longer has."""
+    oi = {k: v for k, v in old.inputs.to_dict().items() if k not in SAMPLE_INDEPENDENT_INPUTS}
+    ni = {k: v for k, v in new.inputs.to_dict().items() if k not in SAMPLE_INDEPENDENT_INPUTS}
+    if oi != ni:
+        return None
+    n_old, n_new = int(old.inputs.samples), int(new.inputs.samples)
+    return [k for k in range(n_old)
+            if k >= n_new or old.rows_of_sample(k) != new.rows_of_sample(k)]
+
+
+def invalidate_outputs(outdir: Path, stale: list[int] | None = None) -> None:
+    """Inputs changed: drop what no longer belongs to the plan.  ``stale`` lists the
+    lens samples to drop (None = every sample, and exposure.txt, which depends on
+    the lens, focus and film); images, views and batch markers always go."""
+    # pupil.npz stays: load_if_current checks its inputs.  A sample's mesh (.inc)
+    # goes with the sample: one still wanted may be in use by a running render.
+    patterns = ["samples/*.done", "samples/*.timing.json", "image.exr",
+                "image.png", "view-*.exr"]
+    if stale is None:
+        patterns += ["samples/*.exr", "samples/*.blocked", "samples/*.inc", "exposure.txt"]
+    for pattern in patterns:
+        for f in outdir.glob(pattern):
+            f.unlink()
+    for k in stale or []:
+        for suffix in (".exr", ".weight.exr", ".blocked", ".inc"):
+            (outdir / "samples" / f"sample_{k:04d}{suffix}").unlink(missing_ok=True)
+
+
+def write_folder(outdir: Path, plan: Plan) -> None:
+    """Write a plan's files into ``outdir``: plan.json, the wrappers, the Makefile.
+
+    What an earlier plan in the folder rendered that this one cannot use is
+    removed first (:func:`stale_samples`, :func:`invalidate_outputs`)."""
+    outdir = Path(outdir)
+    old = None
+    if (outdir / "plan.json").exists():
+        try:
+            old = read_plan(outdir)
+        except PovlensError:
+            old = None
+    if old is not None and old.inputs.to_dict() != plan.inputs.to_dict():
+        invalidate_outputs(outdir, stale_samples(old, plan))
+    cam = plan.povray_camera
+    write_if_changed(outdir / "pinhole.pov", pinhole_wrapper(
+        _scene_include(plan, outdir), cam.location, cam.direction, cam.right, cam.up))
+    write_if_changed(outdir / "focal_blur.pov", focal_blur_text(plan, outdir))
+    if plan.inputs.method == "mesh":
+        (outdir / "samples").mkdir(exist_ok=True)
+        text = _batch_wrapper(plan, outdir)
+        for b, _ in enumerate(plan.batches):
+            write_if_changed(outdir / "samples" / f"batch_{b:03d}.pov", text)
+    write_if_changed(outdir / "Makefile", _makefile(plan))
+    write_plan(plan, outdir)

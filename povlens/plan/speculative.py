@@ -1,0 +1,184 @@
+"""Work ``povlens render --method auto`` starts before its depth probe is in.
+
+The decision (:func:`povlens.plan.decision.decide`) waits for the depth probe,
+but a guess from the lens alone (:func:`early_guess`) is often right, and what
+the guess needs can render meanwhile:
+
+* the first lens samples of a mesh render: sample k does not depend on the
+  sample count, so a provisional plan of :data:`~povlens.plan.decision.MIN_SAMPLES`
+  samples is written and rendered (:func:`start_early_samples`); the final plan
+  adds the samples the decision wants;
+* the adaptive focal_blur view (:func:`start_speculative_focal_blur`), whose
+  settings (:data:`~povlens.plan.decision.FOCAL_BLUR_ADAPTIVE`) do not depend on
+  the probe either; it runs at idle priority (:data:`SPECULATIVE_IDLE`).
+
+:func:`povlens.plan.convert.convert` keeps what the decision confirms and stops
+the rest.  Measurements behind the guesses: docs/decisions/planning.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from povlens.plan.decision import (FOCAL_BLUR_ADAPTIVE, MIN_SAMPLES, STRONG_VIGNETTING,
+                                   VIGNETTING_TOLERANCE, samples_for_blur, shape_error_px)
+from povlens.plan.fixed import PlanStart, finish_plan
+from povlens.plan.options import ConvertOptions
+from povlens.plan.render_folder import focal_blur_text, write_folder
+from povlens.plan.schema import Decision, Plan
+from povlens.pov.process import RenderJob, start_render
+from povlens.util.files import write_text
+
+__all__ = ["SPECULATIVE_IDLE", "early_guess", "lens_rules_out_views",
+           "vignetting_may_choose_mesh", "start_speculative_focal_blur", "SpeculativeView",
+           "start_early_samples", "EarlySamples"]
+
+#: The focal_blur render started on a guess runs at idle priority (Linux
+#: ``SCHED_IDLE``): it gets only the CPU time the probe, the model error and the
+#: early lens samples leave, and all of it once the guess is confirmed.
+SPECULATIVE_IDLE = True
+
+
+def lens_rules_out_views(opts: ConvertOptions, plan0: Plan) -> bool:
+    """Whether the lens alone makes ``--method auto`` choose mesh (a guess).
+
+    True when, at the plan's standard depths (half, once, twice and ten times the
+    focus distance), the distortion, half the blur-size error or half the shape
+    error (the measures of :func:`povlens.plan.decision.decide`) is over the
+    budget ``opts.tolerance_px``, or the vignetting is wanted and strong (relative
+    illumination below :data:`~povlens.plan.decision.STRONG_VIGNETTING` somewhere
+    in the frame).
+    """
+    e = plan0.model_error
+    tol = opts.tolerance_px
+    shape = shape_error_px(np.asarray(e["blur_real_px"]), np.asarray(e["elongation"]))
+    illum = e["min_relative_illumination"]
+    return bool((opts.vignetting and illum < STRONG_VIGNETTING)
+                or e["max_distortion_px"] >= tol or e["max_blur_size_error_px"] / 2 >= tol
+                or float(np.max(shape)) / 2 >= tol)
+
+
+def vignetting_may_choose_mesh(opts: ConvertOptions, plan0: Plan) -> bool:
+    """Whether the vignetting may make ``--method auto`` prefer mesh to the views.
+
+    True when the vignetting is wanted and visible (relative illumination below
+    ``1 - VIGNETTING_TOLERANCE``) and the largest blur at the plan's standard
+    depths needs only the minimum mesh sample count: the case where
+    :func:`povlens.plan.decision.decide` prefers mesh when the vignetting takes
+    :data:`~povlens.plan.decision.VIGNETTING_FLOOR_SHARE` of the budget.
+    """
+    e = plan0.model_error
+    illum = e["min_relative_illumination"]
+    blur = max(float(np.max(e["blur_real_px"])), float(np.max(e["blur_model_px"])))
+    return bool(opts.vignetting and illum < 1.0 - VIGNETTING_TOLERANCE
+                and samples_for_blur(blur) == MIN_SAMPLES)
+
+
+def early_guess(opts: ConvertOptions, plan0: Plan) -> str:
+    """What ``povlens render --method auto`` starts before the depth probe is in.
+
+    Returns
+    -------
+    str
+        * ``"mesh"``: the lens alone rules out the views (:func:`lens_rules_out_views`):
+          the first lens samples of the mesh render;
+        * ``"either"``: the thin lens may do, but the vignetting is wanted and visible
+          while the blur needs only the minimum mesh sample count
+          (:func:`vignetting_may_choose_mesh`): whether the decision takes mesh
+          depends on the scene's image, so both start: the first lens samples, and
+          the adaptive focal_blur view at low priority, which takes the CPU the
+          samples leave;
+        * ``"views"``: otherwise, the adaptive focal_blur view (low priority).
+    """
+    if lens_rules_out_views(opts, plan0):
+        return "mesh"
+    if vignetting_may_choose_mesh(opts, plan0):
+        return "either"
+    return "views"
+
+
+class SpeculativeView:
+    """A running speculative focal_blur render (:func:`start_speculative_focal_blur`);
+    its wrapper is deleted once it is waited for or cancelled."""
+
+    def __init__(self, job: RenderJob, pov: Path):
+        self._job, self._pov = job, pov
+        self.out_path = job.out_path
+
+    def wait(self) -> Path:
+        """Wait for the render; the image's path (raises POV-Ray's error)."""
+        try:
+            return self._job.wait()
+        finally:
+            self._pov.unlink(missing_ok=True)
+
+    def cancel(self) -> None:
+        """Stop the render (if still running) and remove its files; idempotent."""
+        try:
+            self._job.cancel()
+        finally:
+            self._pov.unlink(missing_ok=True)
+
+
+def start_speculative_focal_blur(opts: ConvertOptions, plan0: Plan) -> SpeculativeView:
+    """Start the focal_blur render ``--method auto`` may choose (:func:`early_guess`).
+
+    Its wrapper is its own file (``.speculative-focal-blur.pov``, the text the
+    final ``focal_blur.pov`` gets): the provisional mesh plan an "either" guess
+    writes at the same time rewrites ``focal_blur.pov`` with its own sample
+    count, possibly before POV-Ray has read it.  The image goes to
+    ``.speculative-focal-blur.exr`` in OUTDIR.
+    """
+    out = Path(opts.outdir)
+    pov = out / ".speculative-focal-blur.pov"
+    write_text(pov, focal_blur_text(plan0, out, FOCAL_BLUR_ADAPTIVE))
+    film = plan0.film
+    try:
+        job = start_render(pov, out / ".speculative-focal-blur.exr",
+                           film.width_px, film.height_px, threads=os.cpu_count() or 1,
+                           library_paths=[Path(plan0.inputs.scene).parent],
+                           idle=SPECULATIVE_IDLE)
+    except BaseException:
+        pov.unlink(missing_ok=True)
+        raise
+    return SpeculativeView(job, pov)
+
+
+@dataclasses.dataclass
+class EarlySamples:
+    """Lens samples rendering before the decision: the provisional plan they belong
+    to and the handle ``render_early`` returned (``extend(plan)``, ``wait()``,
+    ``cancel()``; :class:`povlens.render.samples.EarlyRender`)."""
+
+    plan: Plan
+    render: object
+
+
+def start_early_samples(opts: ConvertOptions, start: PlanStart, reuse: dict, table,
+                        render_early: Callable) -> EarlySamples:
+    """Write the provisional mesh plan of an auto conversion whose lens rules out the
+    views (or may), and start rendering it with ``render_early(plan, lens, table)``.
+
+    Parameters
+    ----------
+    opts : the auto conversion's options.
+    start : its :class:`~povlens.plan.fixed.PlanStart`.
+    reuse : :func:`~povlens.plan.fixed.finish_plan` keywords: the pupil table,
+        model error and POV-Ray version already known.
+    table : the exit-pupil table, for the render.
+    render_early : starts the render of a plan (see :func:`povlens.plan.convert.convert`).
+    """
+    n = MIN_SAMPLES if opts.auto_samples else opts.samples
+    eopts = dataclasses.replace(opts, method="mesh", samples=n)
+    plan = finish_plan(eopts, start, **reuse)[0]
+    plan.record_auto_choice(Decision(
+        "mesh", n, ["provisional: the lens alone rules out the pinhole and focal_blur views "
+                    "(vignetting or distortion); the depth probe decides the sample count"],
+        provisional=True), opts.tolerance_px, opts.auto_samples)
+    write_folder(Path(opts.outdir), plan)
+    return EarlySamples(plan, render_early(plan, start.lens, table))

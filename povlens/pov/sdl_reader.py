@@ -1,0 +1,123 @@
+"""Reading a POV-Ray scene the way POV-Ray's parser walks it, to find its camera.
+
+:class:`SceneReader` follows the statements of a scene, its ``#include`` files and its
+macro calls through a :class:`~povlens.pov.sdl_directives.DirectiveStream` (which
+processes the directives); objects and other blocks are skipped.  Its result is the
+camera POV-Ray would use: the *last* camera statement met.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping, Sequence
+
+from povlens.pov.sdl_camera import CameraState, parse_camera_block
+from povlens.pov.sdl_directives import DirectiveStream, Frame, MacroCallError
+from povlens.pov.sdl_errors import SdlEvalError
+from povlens.pov.sdl_lexer import Token
+from povlens.pov.sdl_values import UnknownValue
+
+__all__ = ["SceneReader", "still_constants"]
+
+
+def still_constants(clock: float | None, image_width: int | None,
+                    image_height: int | None) -> dict[str, object]:
+    """POV-Ray's built-in frame values for one image (measured with POV-Ray 3.7.0.10).
+
+    Without a clock, as for a still: everything 0.  With ``+K V`` (one frame at clock V):
+    ``clock`` = V and ``clock_on`` = 1, the rest 0.  ``image_width`` / ``image_height``
+    are None when not given (an error if the scene uses them).
+    """
+    return {
+        "clock": 0.0 if clock is None else float(clock),
+        "clock_on": 0.0 if clock is None else 1.0,
+        "clock_delta": 0.0,
+        "frame_number": 0.0,
+        "initial_clock": 0.0,
+        "final_clock": 0.0,
+        "initial_frame": 0.0,
+        "final_frame": 0.0,
+        "image_width": None if image_width is None else float(image_width),
+        "image_height": None if image_height is None else float(image_height),
+    }
+
+
+class SceneReader:
+    """Walks the scene file ``path`` (:meth:`run`) and keeps what POV-Ray would know at
+    its end: ``camera`` (a :class:`CameraState`, an :class:`UnknownValue` saying why it
+    cannot be told, or None), and the stream's ``included`` / ``unread_includes``.
+
+    Parameters
+    ----------
+    path : the scene file.
+    constants : :func:`still_constants`.
+    library_paths : searched for ``#include`` files after the scene's folder.
+    declares : names declared before the scene (POV-Ray's ``declare=NAME=VALUE``).
+    """
+
+    def __init__(self, path: Path, constants: dict[str, object],
+                 library_paths: Sequence[Path] = (), declares: Mapping[str, object] | None = None):
+        self.stream = DirectiveStream(path, library_paths, constants, dict(declares or {}))
+        self.stream.on_abandon = self._loop_abandoned
+        self.camera: object = None
+        self.camera_frames: list[Frame] = []  # the loops the camera statement was read in
+        self.previous_cam = CameraState()  # for language versions < 3.5
+        self.camera_count = 0
+
+    @property
+    def unread_includes(self) -> list[str]:
+        return self.stream.unread_includes
+
+    @property
+    def included(self) -> list[Path]:
+        return self.stream.included
+
+    def run(self) -> None:
+        """Read the whole scene, directives and statements, to its end."""
+        ds = self.stream
+        ds.start()
+        while True:
+            try:
+                tok = ds.next()
+                if tok.kind == "eof":
+                    break
+                if tok.kind != "ident":
+                    continue
+                nxt = ds.peek()
+                if nxt.kind != "op" or nxt.text != "{":
+                    continue
+                if tok.text == "camera":
+                    self._camera_statement(tok)
+                else:
+                    ds.next()
+                    ds.skip_rest()  # an object or other block
+            except MacroCallError as exc:
+                if exc.macro.has_camera:
+                    self.camera = UnknownValue(
+                        f"{exc}; the macro {exc.macro.name} (defined at {exc.macro.where}) makes "
+                        f"a camera", hint=exc.hint)
+            except SdlEvalError:
+                continue  # a statement povlens cannot follow: the next one
+
+    def _camera_statement(self, tok: Token) -> None:
+        ds = self.stream
+        certain = ds.certain
+        reason = ds.uncertain_reason()
+        tainted = ds.tainted
+        cam = parse_camera_block(ds, ds.expr, tok, declared=False, symbol=ds.symbols.get,
+                                 version=ds.version, previous=self.previous_cam)
+        self.camera_count += 1
+        self.camera_frames = [f for f in ds.frames if f.kind in ("while", "for")]
+        if not certain:
+            self.camera = UnknownValue(f"{tok.where}: the camera statement is inside {reason}")
+            return
+        if ds.tainted != tainted and not isinstance(cam, UnknownValue):
+            self.camera = UnknownValue(f"{tok.where}: the camera's items depend on {ds.last_reason}")
+            return
+        self.camera = cam
+        if isinstance(cam, CameraState):
+            self.previous_cam = cam
+
+    def _loop_abandoned(self, frame: Frame, reason: str) -> None:
+        if any(f is frame for f in self.camera_frames) and isinstance(self.camera, CameraState):
+            self.camera = UnknownValue(f"{self.camera.where}: the camera statement is inside {reason}")
