@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 from povlens.plan.convert import ConvertOptions, convert
-from povlens.render.samples import composite_outdir, lens_for, pupil_table_for, render_outdir, render_view
+from povlens.rendering.samples import composite_outdir, lens_for, pupil_table_for, render_outdir, render_view
 from povlens.plan.schema import read_plan
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -8,7 +8,7 @@ before it::
     thinlens/  the equivalent focal-plane (thin-lens) model and its measured error
     pov/       reading scene cameras, emitting wrappers and ray meshes, running POV-Ray
     plan/      the plan schema, fixed and automatic conversion, the depth probe
-    render/    rendering lens samples, compositing
+    rendering/ rendering lens samples, compositing
     report/    image comparison and the HTML report
     bench/     time-against-error benchmarks
     cli/       the command line, a thin layer over this API
@@ -32,6 +32,8 @@ _API = {
     "composite": "povlens.api",
     "compare": "povlens.api",
     "RenderResult": "povlens.api",
+    "import_lens": "povlens.api",
+    "bundled_lenses": "povlens.lens.bundled",
     "build_pupil_table": "povlens.pupil.build",
     "PupilTable": "povlens.pupil.table",
     "LensPrescription": "povlens.lens.prescription",

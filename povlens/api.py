@@ -20,7 +20,8 @@ from povlens.plan.convert import convert as convert_options
 from povlens.plan.options import ConvertOptions
 from povlens.plan.schema import Plan
 
-__all__ = ["read_lens", "focus", "convert", "render", "composite", "compare", "RenderResult"]
+__all__ = ["read_lens", "focus", "convert", "render", "composite", "compare", "RenderResult",
+           "import_lens"]
 
 
 def read_lens(name_or_path: str | os.PathLike) -> LensPrescription:
@@ -154,7 +155,7 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         The plan and the paths of ``image.exr`` (linear light) and ``image.png``.
         An interrupted render resumes when called again with the same arguments.
     """
-    from povlens.render.samples import convert_and_render
+    from povlens.rendering.samples import convert_and_render
     overrides = {"method": method, **options}
     if samples is not None:
         overrides.update(samples=int(samples), auto_samples=False)
@@ -183,7 +184,7 @@ def composite(outdir: str | os.PathLike, vignetting: bool | None = None) -> np.n
     numpy.ndarray
         ``(H, W, 3)`` float64, linear light.
     """
-    from povlens.render.samples import composite_outdir
+    from povlens.rendering.samples import composite_outdir
     return composite_outdir(outdir, vignetting=vignetting)
 
 
@@ -215,3 +216,44 @@ def compare(a: str | os.PathLike | np.ndarray, b: str | os.PathLike | np.ndarray
     if m is not None and m.ndim == 3:
         m = m[..., 0]
     return compare_arrays(load(a), load(b), m)
+
+
+def import_lens(source: str | os.PathLike, out: str | os.PathLike | None = None, *,
+                lens_id: str | None = None, efl_mm: float | None = None,
+                adjusted: bool = False, glasses: dict | None = None) -> LensPrescription:
+    """Import a lens design from a lentil database or a Zemax ``.zmx`` file.
+
+    Parameters
+    ----------
+    source : str or path
+        A lentil ``lenses.json`` (zpelgrims/lentil) or a Zemax sequential ``.zmx``.
+    out : str or path, optional
+        Write the lens as a Kolb/pbrt file here (atomically), with the source and per
+        row its surface and material as comments; it reads back to the same lens.
+    lens_id : str, optional
+        The lentil entry (``"0001"``); ``povlens.lens.import_lentil.list_lentil`` lists
+        them.  Not needed for a database of one lens.
+    efl_mm : float, optional
+        Scale the design to this focal length, mm (lentil stores most designs at 100).
+    adjusted : bool
+        lentil: the entry's ``optical-elements-adjusted`` table instead of the patent's.
+    glasses : dict, optional
+        Zemax: glass name -> (nd, vd) for catalogue glasses the file gives no index for.
+
+    Returns
+    -------
+    LensPrescription
+        The imported lens (as written, when ``out`` is given).
+
+    Raises
+    ------
+    povlens.errors.LensFileError
+        The source cannot be read or holds what a spherical lens file cannot
+        (aspheres, mirrors, tilts, no stop); names the file, line and surface.
+    povlens.errors.ParameterError
+        An unknown ``lens_id``, or an option that does not apply to the format.
+    """
+    from povlens.lens.importers import import_lens_file
+    imported = import_lens_file(source, lens_id=lens_id, adjusted=adjusted, glasses=glasses,
+                                efl_mm=efl_mm)
+    return imported.lens if out is None else imported.write(out)

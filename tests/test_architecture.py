@@ -16,7 +16,7 @@ PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "povlens"
 # The pipeline, lowest first.  A module may import its own layer and the ones below.
 # The package root (its public API, ``povlens/__init__.py``) sits just below ``cli``: the
 # command line is a thin layer over it.
-LAYERS = ["errors", "util", "lens", "pupil", "thinlens", "pov", "plan", "render", "report",
+LAYERS = ["errors", "util", "lens", "pupil", "thinlens", "pov", "plan", "rendering", "report",
           "bench", "api", "cli"]
 MAX_MODULE_LINES = 700
 MAX_FUNCTION_LINES = 120

@@ -54,9 +54,10 @@ import numpy as np
 from povlens.bench.time_error import ROOT, rmse
 from povlens.plan.convert import ConvertOptions
 from povlens.plan.decision import shift_rmse
-from povlens.render.samples import convert_and_render
+from povlens.rendering.samples import convert_and_render
 from povlens.util.files import atomic_output, write_text
 from povlens.util.images import read_image
+from povlens.util.resources import SCENE_DIR
 
 __all__ = ["AutoBenchSettings", "AutoRow", "run_auto_bench", "shift_rmse", "corrected_rmse",
            "time_at_error", "SCENE_FOCUS"]
@@ -143,7 +144,7 @@ def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]
     t_start = time.perf_counter()
     try:
         for scene in s.scenes:
-            scene_path = ROOT / "scenes" / f"{scene}.pov"
+            scene_path = SCENE_DIR / f"{scene}.pov"
             focus = SCENE_FOCUS.get(scene, 4.0)
             for lens in s.lenses:
                 tag = f"{scene}-{lens}"

@@ -17,8 +17,8 @@ and channels):
 (d) ``focal-blur``     -- POV-Ray's ``focal_blur`` with the equivalent thin lens
     and ``blur_samples N, N`` (``povlens render-view --view focal-blur``).
 
-(a)-(c) use the same mesh code as ``povlens render`` (:func:`povlens.render.samples.render_samples`
-with a sampler and a point override, then :func:`povlens.render.samples.composite_outdir`),
+(a)-(c) use the same mesh code as ``povlens render`` (:func:`povlens.rendering.samples.render_samples`
+with a sampler and a point override, then :func:`povlens.rendering.samples.composite_outdir`),
 one batch of samples per job, the jobs in parallel.  Timings cover rays, meshes, POV-Ray and compositing; the
 one-off per-lens precomputation (table, pbrt boxes) is reported separately, and
 conversion (``plan.json``) is excluded for every method.  (d) is timed over its
@@ -70,10 +70,11 @@ import numpy as np
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import read_plan
 from povlens.pupil.baselines import NaiveRearElement, PbrtBoxes
-from povlens.render.samples import (composite_outdir, exposure_for, lens_for, pupil_table_for,
+from povlens.rendering.samples import (composite_outdir, exposure_for, lens_for, pupil_table_for,
                                     render_samples, render_view)
 from povlens.util.files import atomic_output, write_text
 from povlens.util.images import read_image
+from povlens.util.resources import SCENE_DIR
 
 __all__ = ["BenchSettings", "Row", "METHODS", "full_settings", "quick_settings", "run_bench",
            "render_mesh", "random_points", "time_to_error", "ROOT"]
@@ -94,7 +95,7 @@ REFERENCE_SEED = 7919  # the reference's sample sequence differs from (c)'s (see
 
 @dataclasses.dataclass
 class BenchSettings:
-    scene: str = str(ROOT / "scenes" / "paper.pov")
+    scene: str = str(SCENE_DIR / "paper.pov")
     focus: float = 4.0                      # scene units (m) from the camera location
     lenses: tuple[str, ...] = ("dgauss.50mm", "wide.22mm", "telephoto.250mm")
     samples: tuple[int, ...] = (4, 8, 16, 32, 64)
@@ -155,8 +156,8 @@ def render_mesh(outdir, sampler=None, points=None, jobs: int | None = None) -> n
     sampler : lens sampler for the rays (default: the plan's exit-pupil table).
     points : ``points(k) -> (H, W, 4)`` overriding the plan's Sobol points.
     Batches run ``jobs`` at a time (threads, each driving several POV-Ray
-    processes, as :func:`povlens.render.samples.render_samples` does for
-    :func:`povlens.render.samples.render_batch`).  Samples already rendered are redone.
+    processes, as :func:`povlens.rendering.samples.render_samples` does for
+    :func:`povlens.rendering.samples.render_batch`).  Samples already rendered are redone.
     """
     outdir = Path(outdir)
     plan = read_plan(outdir)

@@ -1,6 +1,6 @@
 """``povlens convert`` / ``render`` / ``composite`` / ``render-batch`` / ``render-view``.
 
-The rendering commands import :mod:`povlens.render.samples` when they run: it loads
+The rendering commands import :mod:`povlens.rendering.samples` when they run: it loads
 OpenImageIO and tqdm (~0.3 s), which ``povlens convert`` does not need.
 """
 
@@ -158,7 +158,7 @@ def run_convert(args) -> int:
 
 
 def run_render(args) -> int:
-    from povlens.render.samples import convert_and_render
+    from povlens.rendering.samples import convert_and_render
     _, out = convert_and_render(options_from_args(args), jobs=args.jobs, quiet=args.quiet,
                                 on_plan=None if args.quiet else
                                 (lambda plan: print(_summary(plan))))
@@ -168,19 +168,19 @@ def run_render(args) -> int:
 
 
 def run_composite(args) -> int:
-    from povlens.render.samples import composite_outdir
+    from povlens.rendering.samples import composite_outdir
     composite_outdir(args.outdir)
     return 0
 
 
 def run_batch(args) -> int:
-    from povlens.render.samples import render_batch
+    from povlens.rendering.samples import render_batch
     render_batch(args.outdir, args.batch, in_flight=args.in_flight)
     return 0
 
 
 def run_view(args) -> int:
-    from povlens.render.samples import render_view
+    from povlens.rendering.samples import render_view
     render_view(args.outdir, args.view)
     return 0
 

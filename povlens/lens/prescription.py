@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from povlens.errors import LensClipWarning, LensFileError
+from povlens.util.resources import LENS_DIR
 from povlens.util.files import write_bytes
 
 __all__ = ["LensPrescription", "read_lens", "parse_lens_text", "write_lens", "format_lens",
@@ -192,8 +193,7 @@ def resolve_lens_path(name: str | os.PathLike) -> Path:
     p = Path(name)
     if p.exists():
         return p
-    bundled = Path(__file__).resolve().parents[2] / "lenses"
-    for cand in (bundled / p.name, bundled / f"{p.name}.dat"):
+    for cand in (LENS_DIR / p.name, LENS_DIR / f"{p.name}.dat"):
         if cand.exists():
             return cand
     return p

@@ -30,6 +30,7 @@ from povlens.plan.options import METHODS, ConvertOptions
 from povlens.plan.render_folder import write_folder
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pov.executable import povray_version
+from povlens.util.resources import resolve_scene_path
 
 __all__ = ["ConvertOptions", "METHODS", "convert", "make_plan"]
 
@@ -185,6 +186,7 @@ def convert(opts: ConvertOptions, render_early=None) -> Plan:
     stopped and its temporary files removed, and no plan.json of this call is
     left half-written.
     """
+    opts = dataclasses.replace(opts, scene=str(resolve_scene_path(opts.scene)))
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
     opts, focus_info = resolve_focus(opts)                # option, camera, or depth probe

@@ -22,8 +22,8 @@
   adaptive focal blur does.
 
 **Vignetting in image terms.**  Vignetting is not a displacement, so it is judged
-by its effect on this scene's image: the probe also renders the view without fog
-(the scene as a pinhole camera sees it), and leaving the vignetting out is a
+by its effect on this scene's image: the probe also renders the view as it is
+(the scene as a pinhole camera sees it, at full quality), and leaving the vignetting out is a
 deviation when its image RMSE, RMS(I (1 - E/E0)) with the lens's relative
 illumination E/E0 at each pixel (:func:`vignetting_rmse`), is at least the RMSE
 of moving the same image by the tolerance (:func:`shift_rmse`, the budget in image

@@ -48,9 +48,9 @@ between it and what lies behind it.
 **Precision** (:data:`FADE_POWER`, :data:`LIGHT_COLOUR`): POV-Ray writes EXR as half
 floats (relative rounding 2^-11).  With p = 1 the depth's relative error is about
 (2^-11 .. 2^-10) x (1 + x)/x for x = d/D: measured (docs/decisions/planning.md,
-"Depth probe by a fading light") within 0.2 % from d = D/20 to 100 D, where p = 2
-(the prototype's) loses 5 % at D/20 and 0.9 % at 100 D.  D defaults to the focus
-distance.  L = 1000 makes B2 - B0 (L x diffuse x colour x cos) large against the
+"Depth probe by a fading light") within 1 % from d = D/20 to 100 D and 0.25 % from
+D/5, where p = 2 (the prototype's) loses 5.5 % at D/20 and 0.9 % at 100 D.  D
+defaults to the focus distance.  L = 1000 makes B2 - B0 (L x diffuse x colour x cos) large against the
 scene's own light B0 (usually below 1-2) and keeps B1 <= 2 L x (diffuse + highlights)
 far below the half-float maximum 65504.
 
@@ -91,7 +91,8 @@ __all__ = ["ProbeView", "probe_depth", "start_probe", "DepthProbe", "probe_wrapp
            "PROBE_SWITCHES", "RATIO_TOLERANCE", "BACKGROUND_ALPHA", "NEAR_PERCENTILE",
            "FAR_PERCENTILE", "BACKGROUND_FRACTION", "METHOD", "TREATMENT"]
 
-#: Fade power p of the probe's light (module docstring: 1 resolves d from D/20 to 100 D).
+#: Fade power p of the probe's light (module docstring: 1 resolves d from D/20 to 100 D
+#: within 1 %; 2 loses 5.5 % at D/20).
 FADE_POWER = 1.0
 #: Colour (all channels) of the probe's light: B2 - B0 large against B0, B1 << 65504.
 LIGHT_COLOUR = 1000.0

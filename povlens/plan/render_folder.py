@@ -7,7 +7,7 @@ OUTDIR gets
   declare their own camera last (POV-Ray uses the last camera);
 * for the mesh method, ``samples/batch_NNN.pov``: wrappers that render one lens
   sample each per POV-Ray run (the sample's ray mesh is written just before,
-  :mod:`povlens.render.samples`);
+  :mod:`povlens.rendering.samples`);
 * ``Makefile``: ``make -C OUTDIR -j2`` renders and composites; a second ``make``
   does nothing.
 

@@ -4,7 +4,7 @@ A :class:`Plan` holds every input and derived number of a conversion
 (:mod:`povlens.plan.convert`): the inputs, the focused lens, the film, where the
 camera frame sits in the scene, the equivalent thin lens and what it gets wrong,
 POV-Ray's camera and image size, the lens-sample batches and, for ``--method
-auto``, the decision.  The render (:mod:`povlens.render`), the report and the
+auto``, the decision.  The render (:mod:`povlens.rendering`), the report and the
 benchmarks read it with :func:`read_plan`; :func:`write_plan` writes it.
 
 On disk the plan is one JSON object whose keys are the :class:`Plan` fields (in

@@ -153,7 +153,7 @@ def start_speculative_focal_blur(opts: ConvertOptions, plan0: Plan) -> Speculati
 class EarlySamples:
     """Lens samples rendering before the decision: the provisional plan they belong
     to and the handle ``render_early`` returned (``extend(plan)``, ``wait()``,
-    ``cancel()``; :class:`povlens.render.samples.EarlyRender`)."""
+    ``cancel()``; :class:`povlens.rendering.samples.EarlyRender`)."""
 
     plan: Plan
     render: object

@@ -92,12 +92,15 @@ class Declarations:
                 self.skip_statement_raw()
             value = UnknownValue(f"its #declare at {name.where} could not be evaluated ({exc})",
                                  hint=exc.hint)
-        ds.declare_depth += 1  # a following #declare must not run before this one is stored
-        try:
-            if ds.peek().text == ";":
-                ds.next()
-        finally:
-            ds.declare_depth -= 1
+        # The optional ';', looked at without processing what follows: a directive or
+        # macro call after the statement must not run before its value is stored.
+        if ds.buf:
+            if ds.buf[0].kind == "op" and ds.buf[0].text == ";":
+                ds.buf.pop(0)
+        else:
+            t = ds.raw.next()
+            if t.kind != "op" or t.text != ";":
+                ds.raw.unget(t)
         return value
 
     def _rhs(self, name: Token):

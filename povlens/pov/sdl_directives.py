@@ -36,8 +36,11 @@ __all__ = ["DirectiveStream", "Frame", "MacroCallError", "MAX_LOOP_ITERATIONS",
 
 #: Include files larger than this are not read (they are mesh data, not cameras).
 MAX_INCLUDE_BYTES = 16 * 1024 * 1024
-#: Loop iterations followed in a whole scene before loops are no longer followed.
+#: Loop iterations, and tokens read in loops, followed in a whole scene; past either,
+#: loops are no longer followed (what they assign becomes unknown).  Loops mostly build
+#: geometry; 100000 tokens take about a third of a second.
 MAX_LOOP_ITERATIONS = 20000
+MAX_LOOP_TOKENS = 100_000
 #: Nested macro calls followed (POV-Ray's own limit is about as deep).
 MAX_MACRO_DEPTH = 100
 
@@ -74,6 +77,7 @@ class Frame:
     step: float = 1.0  # #for
     var: str = ""  # #for: the loop variable
     log_start: int = 0  # loops: symbols.log length when the loop started
+    tokens_start: int = 0  # loops: raw tokens read when the iteration started
     source: SourceFile | None = None  # macro calls: the body being read
     saved_depth: int = 0  # macro calls: the caller's declare depth
 
@@ -104,6 +108,8 @@ class DirectiveStream:
         self.tainted = 0  # tokens handed out while uncertain
         self.last_reason = ""  # why the latest uncertain branch is uncertain
         self.loop_iterations = 0
+        self.loop_tokens = 0
+        self._loop_counted = 0  # tokens_read when loop tokens were last counted
         self.used_names: set[str] = set()  # constants read (clock, image_width...)
         self.included: list[Path] = []
         self.unread_includes: list[str] = []
@@ -339,11 +345,9 @@ class DirectiveStream:
         (consumed and returned; an ``#end`` counts only at this level)."""
         depth = 0
         while True:
-            tok = self.raw.next()
+            tok = self.raw.next_directive()
             if tok.kind == "eof":
                 return tok
-            if tok.kind != "directive":
-                continue
             if tok.text in OPENERS:
                 depth += 1
             elif tok.text == "#end":
@@ -484,7 +488,7 @@ class DirectiveStream:
     def _while(self, tok: Token) -> None:
         self.buf = []
         frame = Frame("while", "run", tok.where, mark=self.raw.mark(),
-                      log_start=len(self.symbols.log))
+                      log_start=len(self.symbols.log), tokens_start=self.raw.tokens_read)
         self._loop_test(frame, tok)
 
     def _loop_test(self, frame: Frame, tok: Token) -> None:
@@ -522,7 +526,8 @@ class DirectiveStream:
             return
         self.symbols.declare(name.text, start, local=True)
         frame = Frame("for", "run", tok.where, mark=self.raw.mark(), value=end, step=step,
-                      var=name.text, log_start=len(self.symbols.log))
+                      var=name.text, log_start=len(self.symbols.log),
+                      tokens_start=self.raw.tokens_read)
         if (start <= end) if step > 0 else (start >= end):
             self.frames.append(frame)
         else:
@@ -531,9 +536,13 @@ class DirectiveStream:
     def _loop_again(self, frame: Frame, tok: Token) -> None:
         """At a loop's ``#end``: go round again (within the budget) or leave."""
         self.loop_iterations += 1
-        if self.loop_iterations > MAX_LOOP_ITERATIONS:
-            reason = (f"the loop at {frame.where} was not followed to its end (povlens follows "
-                      f"{MAX_LOOP_ITERATIONS} loop iterations in a scene)")
+        now = self.raw.tokens_read  # (nested loops: count each token once)
+        self.loop_tokens += now - max(frame.tokens_start, self._loop_counted)
+        self._loop_counted = now
+        if self.loop_iterations > MAX_LOOP_ITERATIONS or self.loop_tokens > MAX_LOOP_TOKENS:
+            reason = (f"the loop at {frame.where}, which povlens did not follow to its end (it "
+                      f"follows {MAX_LOOP_ITERATIONS} iterations or {MAX_LOOP_TOKENS} tokens "
+                      f"of loops in a scene)")
             self.symbols.forget(self.symbols.log[frame.log_start:], reason)
             if self.on_abandon is not None:
                 self.on_abandon(frame, reason)
@@ -541,6 +550,7 @@ class DirectiveStream:
         if frame.mark is None or not self.raw.reset(frame.mark):
             return
         self.buf = []
+        frame.tokens_start = self.raw.tokens_read
         if frame.kind == "while":
             self._loop_test(frame, tok)
             return
@@ -657,22 +667,10 @@ class DirectiveStream:
                 params.append(p.text)
         src = self.raw.files[-1] if self.raw.files else None
         start = self.raw.mark()
-        has_camera, depth = False, 0
-        while True:
-            t = self.raw.next()
-            if t.kind == "eof":
-                return
-            if t.kind == "ident" and t.text == "camera":
-                has_camera = True
-            elif t.kind == "directive":
-                if t.text in OPENERS:
-                    depth += 1
-                elif t.text == "#end":
-                    if depth == 0:
-                        break
-                    depth -= 1
-        if src is None or start is None or start[0] is not src or t.path != src.path:
+        t = self._skip_to(frozenset())
+        if t.kind == "eof" or src is None or start is None or start[0] is not src or t.path != src.path:
             return
+        has_camera = "camera" in src.text[start[1]:t.offset]  # (for messages only)
         del optional[len(params):]
         self.symbols.declare(name.text, Macro(
             name.text, tuple(params), tuple(optional), src.text, src.path, start[1], start[2],

@@ -19,19 +19,26 @@ from povlens.pov.sdl_errors import SceneCameraError, SdlEvalError
 
 __all__ = ["Token", "SourceFile", "TokenStream"]
 
+#: One token, after any whitespace and line comments (``lastgroup`` names its kind;
+#: ``end`` matches only at the end of the text).
 _TOKEN_RE = re.compile(
     r"""
-    (?P<ws>\s+)
-  | (?P<lcomment>//[^\n]*)
-  | (?P<bcomment>/\*)
-  | (?P<string>"(?:[^"\\\n]|\\.)*")
-  | (?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
-  | (?P<directive>\#\s*[A-Za-z_][A-Za-z0-9_]*)
-  | (?P<ident>[A-Za-z_][A-Za-z0-9_]*)
-  | (?P<op><=|>=|!=|[{}()<>\[\],;=+\-*/.?:!&|%^$@])
+    (?:\s+|//[^\n]*)*
+    (?:
+      (?P<bcomment>/\*)
+    | (?P<string>"(?:[^"\\\n]|\\.)*")
+    | (?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
+    | (?P<directive>\#\s*[A-Za-z_][A-Za-z0-9_]*)
+    | (?P<ident>[A-Za-z_][A-Za-z0-9_]*)
+    | (?P<op><=|>=|!=|[{}()<>\[\],;=+\-*/.?:!&|%^$@])
+    | (?P<end>\Z)
+    )
     """,
     re.VERBOSE,
 )
+
+#: What a scan for the next directive must look at: strings, comments, directives.
+_DIRECTIVE_RE = re.compile(r'"|/\*|//|\#\s*[A-Za-z_][A-Za-z0-9_]*')
 
 
 class Token(NamedTuple):
@@ -104,19 +111,47 @@ class SourceFile:
                 self._advance(self.pos + 1)
                 continue
             kind = m.lastgroup
-            end = m.end()
+            start = m.start(kind)
+            line = self.line + text.count("\n", self.pos, start)
             if kind == "bcomment":
-                end = _block_comment_end(text, end)
-            elif kind not in ("ws", "lcomment"):
-                tok_text = m.group()
-                if kind == "directive":
-                    tok_text = "#" + tok_text[1:].strip()
-                start = m.start()
-                tok = Token(kind, tok_text, self.path, self.line + text.count("\n", self.pos, start), start)
-                self._advance(end)
-                return tok
-            self._advance(end)
+                end = _block_comment_end(text, m.end())
+                self.line = line + text.count("\n", start, end)
+                self.pos = end
+                continue
+            self.pos, self.line = m.end(), line
+            if kind == "end":
+                return None
+            tok_text = m.group(kind)
+            if kind == "directive":
+                tok_text = "#" + tok_text[1:].strip()
+            return Token(kind, tok_text, self.path, line, start)
         return None
+
+    def scan_directive(self) -> Token | None:
+        """Skip the text to the next directive (strings and comments honoured) and return
+        it, or None at the end (the buffer must be empty)."""
+        text, n = self.text, self.end
+        search = _DIRECTIVE_RE.search
+        i = self.pos
+        while True:
+            m = search(text, i, n)
+            if m is None:
+                self._advance(n)
+                return None
+            t = m.group()
+            if t == '"':
+                i = _STRING_RE.match(text, m.start(), n).end()
+            elif t == "/*":
+                i = min(n, _block_comment_end(text, m.end()))
+            elif t == "//":
+                j = text.find("\n", m.end(), n)
+                i = n if j < 0 else j
+            else:
+                start = m.start()
+                self._advance(start)
+                line = self.line
+                self._advance(m.end())
+                return Token("directive", "#" + t[1:].strip(), self.path, line, start)
 
     def skip_block_text(self, force: bool) -> bool:
         """Skip to just after the '}' matching an already consumed '{'.
@@ -222,6 +257,23 @@ class TokenStream:
             return self._eof
         self.tokens_read += 1
         return f.buf.pop(0)
+
+    def next_directive(self) -> Token:
+        """Consume everything up to the next directive and return it (``"eof"`` at the
+        end): a fast way through text that is not read (a false branch, a macro body)."""
+        while self.files:
+            f = self.files[-1]
+            while f.buf:
+                tok = f.buf.pop(0)
+                if tok.kind == "directive":
+                    return tok
+            tok = f.scan_directive()
+            if tok is not None:
+                return tok
+            self.files.pop()
+            if self.on_close is not None:
+                self.on_close(f)
+        return self._eof
 
     def unget(self, tok: Token) -> None:
         """Put ``tok`` back in front of the next token."""

@@ -9,17 +9,17 @@ from __future__ import annotations
 
 import os
 import string
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from povlens.errors import PovlensError
+from povlens.util.resources import TEMPLATE_DIR as BUNDLED_TEMPLATES
 
 __all__ = ["TEMPLATE_DIR", "pov_vector", "pov_string", "read_template"]
 
 #: Folder holding the ``*.tmpl`` files (wrapper scenes, the output folder's Makefile).
-TEMPLATE_DIR = Path(__file__).resolve().parents[2] / "templates"
+TEMPLATE_DIR = BUNDLED_TEMPLATES
 
 
 def pov_vector(v: Sequence[float]) -> str:

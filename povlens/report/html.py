@@ -45,7 +45,7 @@ from povlens.plan.depth_probe import axial_depth, probe_depth
 from povlens.plan.schema import Plan, read_plan
 from povlens.pupil.plot import plot_pupil_shapes
 from povlens.pupil.storage import cached_pupil_table
-from povlens.render.samples import composite_outdir, lens_for, render_view
+from povlens.rendering.samples import composite_outdir, lens_for, render_view
 from povlens.report.compare import compare_arrays, difference_magnitude, false_colour
 from povlens.util.files import write_text
 from povlens.util.images import read_image

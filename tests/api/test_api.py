@@ -47,3 +47,15 @@ def test_render_composite_and_compare(tmp_path):
     diff = povlens.compare(pin.image_exr, mesh.image_exr)
     # the same view: close, but a real lens is not a pinhole
     assert 0 < diff["rmse"] < 0.5
+
+
+def test_api_names_survive_the_import_of_every_subpackage():
+    # a subpackage named like an API function would replace it on import
+    import importlib
+    import pkgutil
+    for mod in pkgutil.walk_packages(povlens.__path__, "povlens."):
+        if not mod.name.endswith("__main__"):
+            importlib.import_module(mod.name)
+    for name in povlens.__all__:
+        if name != "__version__":
+            assert not isinstance(getattr(povlens, name), type(povlens)), name

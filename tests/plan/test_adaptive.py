@@ -11,7 +11,7 @@ import pytest
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import PovraySettings
 from povlens.util.images import read_image
-from povlens.render.samples import (film_row_args, composite_outdir, render_outdir, sample_rows,
+from povlens.rendering.samples import (film_row_args, composite_outdir, render_outdir, sample_rows,
                             samples_per_pixel)
 
 from conftest import ROOT
@@ -107,7 +107,7 @@ def test_adaptive_render_matches_uniform_and_resumes(tmp_path):
 
 
 def test_blocked_sample_is_not_rendered_and_counts_as_black(tmp_path, monkeypatch):
-    import povlens.render.samples as render
+    import povlens.rendering.samples as render
     convert(opts(tmp_path, "b", adaptive=False, samples=2, batch_size=2))
     real = render.sample_rays
 

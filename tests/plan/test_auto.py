@@ -95,6 +95,7 @@ def test_auto_plan_numbers_equal_a_plan_of_the_chosen_method(tmp_path):
                           width=40, height=30, method="auto")
     plan = convert(opts).to_dict()
     d = plan.pop("decision")
+    assert plan.pop("depth_probe")["depth_range"] == d["numbers"]["depth_probe"]
     for k in ("requested_method", "tolerance_px", "auto_samples"):
         plan["inputs"].pop(k)
     again = make_plan(dataclasses.replace(opts, outdir=str(tmp_path / "b"), method=d["method"],
@@ -111,7 +112,7 @@ def test_speculative_focal_blur_is_the_final_view(tmp_path):
     import numpy as np
     from povlens.plan.convert import convert
     from povlens.util.images import read_image
-    from povlens.render.samples import render_outdir, render_view
+    from povlens.rendering.samples import render_outdir, render_view
     root = pathlib.Path(__file__).resolve().parents[2]
     base = dict(scene=str(root / "scenes" / "paper.pov"), lens="telephoto.250mm", focus=4.0,
                 width=48, height=36, method="auto")
@@ -210,7 +211,7 @@ def test_probe_skips_the_view_when_the_vignetting_is_not_wanted(tmp_path):
 
 
 def test_probe_renders_the_view_and_the_decision_judges_vignetting_by_it(tmp_path):
-    """The probe's fog-free view equals a pinhole render at the probe size; a lens
+    """The probe's view as it is equals a pinhole render at the probe size; a lens
     whose corners lose 12 % (cooke.triplet.50mm) is a deviation on a bright scene
     and none on the same scene made dark at the edges."""
     import numpy as np

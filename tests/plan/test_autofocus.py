@@ -14,7 +14,7 @@ import pytest
 from povlens.cli import main
 from povlens.lens.film import Film
 from povlens.plan.autofocus import pixel_shift_px, window_camera
-from povlens.plan.depth_probe import ray_directions
+from povlens.plan.depth_probe import ProbeView, ray_directions
 from povlens.plan.schema import PovrayCamera
 
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None,
@@ -46,6 +46,7 @@ def _convert(tmp_path, camera: str, *args, method: str = "pinhole", scene: str =
     return code, plan
 
 
+@needs_povray
 def test_focus_from_the_option(tmp_path):
     code, plan = _convert(tmp_path, "camera { location 0 look_at z aperture 0.1 "
                                     "focal_point <0, 0, 6> }", "--focus", "5")
@@ -54,6 +55,7 @@ def test_focus_from_the_option(tmp_path):
     assert "depth_probe" not in plan                          # no probe ran
 
 
+@needs_povray
 def test_focus_from_the_cameras_focal_point(tmp_path):
     code, plan = _convert(tmp_path, "camera { location <0, 0, 0> look_at <0, 0, 4> "
                                     "aperture 0.05 focal_point <0.3, 0, 5.5> }",
@@ -64,6 +66,7 @@ def test_focus_from_the_cameras_focal_point(tmp_path):
     assert plan["focus"]["focus_from_camera_mm"] == pytest.approx(1000 * np.hypot(0.3, 5.5))
 
 
+@needs_povray
 def test_focus_from_the_cameras_look_at(tmp_path):
     """A focal_point without focal blur (no aperture) is not a focus: look_at is."""
     code, plan = _convert(tmp_path, "camera { location <0, 0, 0> look_at <0, 0, 4.25> "
@@ -101,7 +104,7 @@ def test_focus_at_a_pixel_for_every_method(tmp_path, method):
                           for k, v in plan["povray_camera"].items()})
     film = Film(plan["film"]["width_mm"], plan["film"]["height_mm"], 32, 24)
     win, wfilm = window_camera(cam, film, 3.5, 12.5, 1)
-    d = ray_directions(type("V", (), {"povray_camera": win, "film": wfilm}))[0, 0]
+    d = ray_directions(ProbeView(win, wfilm, 1000.0, "", 3.0))[0, 0]
     assert d[0] / d[2] * 3.0 < -0.4
 
 
@@ -135,9 +138,9 @@ def test_window_camera_shoots_the_images_rays_and_the_shift_of_a_point():
     cam = PovrayCamera((1.0, 2.0, 3.0), (0.0, 0.0, 2.0), (1.6, 0.0, 0.0), (0.0, 1.2, 0.0),
                        0.0, 1.0, 40.0)
     film = Film(36.0, 27.0, 40, 30)
-    full = ray_directions(type("V", (), {"povray_camera": cam, "film": film}))
+    full = ray_directions(ProbeView(cam, film, 1.0, "", 1.0))
     win, wfilm = window_camera(cam, film, 7.5, 20.5, 5)       # pixels 5..9, 18..22
-    part = ray_directions(type("V", (), {"povray_camera": win, "film": wfilm}))
+    part = ray_directions(ProbeView(win, wfilm, 1.0, "", 1.0))
     np.testing.assert_allclose(part, full[18:23, 5:10], atol=1e-12)
     assert pixel_shift_px(cam, cam, film, 7.5, 20.5) == pytest.approx(0.0, abs=1e-9)
     wider = PovrayCamera(cam.location, cam.direction, (1.76, 0.0, 0.0), (0.0, 1.32, 0.0),

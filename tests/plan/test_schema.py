@@ -130,3 +130,23 @@ def test_a_new_plan_round_trips(tmp_path):
                                       height=12, method=method, **kw))
         assert read_plan(out) == plan
         assert plan_json(read_plan(out)) == (out / "plan.json").read_text()
+
+
+def test_the_focus_source_and_the_depth_probe_record_round_trip(tmp_path):
+    """Issue 13's fields: written when set, read back equal; absent in the old plans."""
+    import dataclasses
+    from povlens.plan.schema import DepthProbeRecord
+    old = read_plan(DATA / "plan_v1_pinhole.json")
+    assert old.inputs.focus_from is None and old.depth_probe is None
+    rec = DepthProbeRecord("light fade", "background inf", "the scene has fog",
+                           {"probe_pixels": 12, "no_depth_pixels": 3},
+                           {"point_px": [3.5, 12.5], "rounds": 1})
+    plan = dataclasses.replace(old, inputs=dataclasses.replace(
+        old.inputs, focus_from="depth probe at 3,12", focus_at=(3, 12)), depth_probe=rec)
+    d = json.loads(plan_json(plan))
+    assert d["inputs"]["focus_from"] == "depth probe at 3,12" and d["inputs"]["focus_at"] == [3, 12]
+    assert d["depth_probe"]["depth_range"]["no_depth_pixels"] == 3
+    write_plan(plan, tmp_path)
+    assert read_plan(tmp_path) == plan
+    bare = dataclasses.replace(rec, scene_atmosphere=None, focus=None)
+    assert set(bare.to_dict()) == {"method", "treatment", "depth_range"}

@@ -48,7 +48,7 @@ from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pupil.sampling import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
-from povlens.render.composite import composite
+from povlens.rendering.composite import composite
 from povlens.util.images import read_image, write_exr, write_png_srgb
 from povlens.pupil.rays import ScenePlacement, sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from povlens.render.composite import composite
+from povlens.rendering.composite import composite
 from povlens.errors import PovlensError
 from povlens.util.images import ImageError, read_image, write_exr, write_png_srgb
 
