@@ -29,11 +29,11 @@ DEBUG_ENV_VAR = "POVLENS_DEBUG"
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ["inspect", "focus", "trace", "check", "plan", "render", "pupil", "compare", "bench",
-            "report"]
+            "report", "lenses", "import_lens"]
 
 #: Commands registered by a module of another name (the others: ``<command>_cmd``).
 _MODULE_OF = {"convert": "render", "composite": "render", "render-batch": "render",
-              "render-view": "render"}
+              "render-view": "render", "import-lens": "import_lens"}
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:

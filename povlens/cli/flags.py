@@ -41,6 +41,10 @@ FLAG_OF = {
     "film_diagonal_mm": "--film-diagonal",
     "film_size_mm": "--film-size",
     "film_distance_mm": "--film-distance",
+    "lens_id": "--id",
+    "efl_mm": "--efl",
+    "adjusted": "--adjusted",
+    "glasses": "--glass",
 }
 
 _NAMES = "|".join(sorted(map(re.escape, FLAG_OF), key=len, reverse=True))

@@ -38,7 +38,7 @@ def run(args) -> int:
     for b in lenses:
         print(f"{b.name:<20} {b.efl_mm:>8.2f} {b.f_number:>8.2f}  {fov_text(b):<32} "
               f"{b.description or '-'}")
-        print(f"{'':<71} {b.source}")
+        print(f"{'':<72} {b.source}")
     print(f"\nfield of view: diagonal, on a {args.film_diagonal:g} mm film diagonal, real chief "
           f"ray at infinity focus; '-' where no chief ray reaches the film")
     return 0

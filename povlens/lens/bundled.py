@@ -114,8 +114,11 @@ def lens_sources(sources_md: str | Path) -> dict[str, tuple[str, str]]:
         if m and m["file"] not in out:
             fmt = _plain(m["format"])
             lens = _plain(m["lens"])
-            out[m["file"]] = (f"{lens} ({fmt})" if "pbrt" != fmt else lens,
-                              _plain(m["origin"]))
+            if "converted" in fmt.lower():
+                lens += " (converted to pbrt)"
+            elif fmt != "pbrt" and fmt.lower() not in lens.lower():
+                lens += f" ({fmt})"
+            out[m["file"]] = (lens, _plain(m["origin"]))
     return out
 
 

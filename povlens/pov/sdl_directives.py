@@ -72,6 +72,7 @@ class Frame:
     where: str
     certain: bool = True
     reason: str = ""  # why it is uncertain
+    hint: str = ""  # ... and what the user could pass
     mark: Mark | None = None  # loops: where the condition (#while) or body (#for) starts
     value: float = 0.0  # #switch: the value; #for: the end value
     step: float = 1.0  # #for
@@ -107,6 +108,7 @@ class DirectiveStream:
         self.version = 3.7
         self.tainted = 0  # tokens handed out while uncertain
         self.last_reason = ""  # why the latest uncertain branch is uncertain
+        self.last_hint = ""
         self.loop_iterations = 0
         self.loop_tokens = 0
         self._loop_counted = 0  # tokens_read when loop tokens were last counted
@@ -133,6 +135,13 @@ class DirectiveStream:
         for f in reversed(self.frames):
             if not f.certain:
                 return f.reason
+        return ""
+
+    def uncertain_hint(self) -> str:
+        """What to pass to make the current position certain ("" if nothing helps)."""
+        for f in reversed(self.frames):
+            if not f.certain:
+                return f.hint
         return ""
 
     def peek(self, ahead: int = 0) -> Token:
@@ -300,15 +309,16 @@ class DirectiveStream:
             self.decl.file_directive(tok)
         # other directives (#statistics...) are ignored
 
-    def _condition(self) -> tuple[bool | None, str]:
-        """Evaluate ``( expression )``: (True/False, "") or (None, why not)."""
-        value, reason = self._paren_value()
+    def _condition(self) -> tuple[bool | None, SdlEvalError | None]:
+        """Evaluate ``( expression )``: (True/False, None) or (None, why not)."""
+        value, err = self._paren_value()
         if value is None:
-            return None, reason
-        return value != 0.0, ""
+            return None, err
+        return value != 0.0, None
 
     def _paren_value(self, two: bool = False):
-        """``( float )`` (or ``( float, float )``): the value(s), or (None, why not)."""
+        """``( float )`` (or ``( float, float )``): (the value(s), None) or (None, the
+        error)."""
         mark = self.mark()
         try:
             self.expr.expect("(")
@@ -318,11 +328,11 @@ class DirectiveStream:
                 self.expr.expect(",")
                 b = as_float(self.expr.parse(), "range")
             self.expr.expect(")")
-            return ((a, b) if two else a), ""
+            return ((a, b) if two else a), None
         except SdlEvalError as exc:
             if mark is not None and self.reset(mark):
                 self.skip_parens_raw()
-            return None, str(exc)
+            return None, exc
 
     def skip_parens_raw(self) -> None:
         """Skip a balanced ``( ... )`` if one comes next (raw tokens)."""
@@ -357,25 +367,29 @@ class DirectiveStream:
             elif depth == 0 and tok.text in stops:
                 return tok
 
-    def _uncertain_frame(self, kind: str, tok: Token, reason: str, state: str = "all") -> Frame:
-        why = f"the {tok.text} at {tok.where}, whose value povlens cannot evaluate ({reason})"
-        self.last_reason = why
-        return Frame(kind, state, tok.where, certain=False, reason=why)
+    def _uncertain_frame(self, kind: str, tok: Token, err: SdlEvalError, state: str = "all") -> Frame:
+        why = f"the {tok.text} at {tok.where}, whose value povlens cannot evaluate ({err})"
+        self.last_reason, self.last_hint = why, err.hint
+        return Frame(kind, state, tok.where, certain=False, reason=why, hint=err.hint)
+
+    def _make_uncertain(self, frame: Frame, tok: Token, err: SdlEvalError, state: str = "all") -> None:
+        u = self._uncertain_frame(frame.kind, tok, err)
+        frame.state, frame.certain, frame.reason, frame.hint = state, False, u.reason, u.hint
 
     def _if(self, tok: Token) -> None:
         if tok.text == "#if":
-            c, reason = self._condition()
+            c, err = self._condition()
         else:
-            c, reason = self._ifdef(tok)
+            c, err = self._ifdef(tok)
         if c is None:
-            self.frames.append(self._uncertain_frame("if", tok, reason))
+            self.frames.append(self._uncertain_frame("if", tok, err))
         elif c:
             self.frames.append(Frame("if", "run", tok.where))
         else:
             self.frames.append(Frame("if", "seek", tok.where))
             self._seek_branch(self.frames[-1])
 
-    def _ifdef(self, tok: Token) -> tuple[bool | None, str]:
+    def _ifdef(self, tok: Token) -> tuple[bool | None, SdlEvalError | None]:
         self.buf = []
         p, name, q = self.raw.next(), self.raw.next(), self.raw.next()
         if p.text != "(" or name.kind != "ident" or q.text != ")":
@@ -384,11 +398,12 @@ class DirectiveStream:
             if p.text == "(":
                 self.raw.unget(p)
                 self.skip_parens_raw()
-            return None, f"{tok.where}: {tok.text} needs '(identifier)'"
+            return None, SdlEvalError(f"{tok.where}: {tok.text} needs '(identifier)'")
         ans = self.defined(name.text)
         if ans is None:
-            return None, f"whether '{name.text}' is declared depends on an uncertain branch"
-        return (ans if tok.text == "#ifdef" else not ans), ""
+            return None, SdlEvalError(f"whether '{name.text}' is declared depends on an "
+                                      f"uncertain branch")
+        return (ans if tok.text == "#ifdef" else not ans), None
 
     def _seek_branch(self, frame: Frame) -> None:
         """In an ``#if`` whose branch so far is false: find the branch that is read."""
@@ -400,10 +415,9 @@ class DirectiveStream:
             if d.text == "#else":
                 frame.state = "run"
                 return
-            c, reason = self._condition()
+            c, err = self._condition()
             if c is None:
-                u = self._uncertain_frame("if", d, reason)
-                frame.state, frame.certain, frame.reason = "all", False, u.reason
+                self._make_uncertain(frame, d, err)
                 return
             if c:
                 frame.state = "run"
@@ -436,9 +450,9 @@ class DirectiveStream:
             self._loop_again(f, tok)
 
     def _switch(self, tok: Token) -> None:
-        value, reason = self._paren_value()
+        value, err = self._paren_value()
         if value is None:
-            self.frames.append(self._uncertain_frame("switch", tok, reason))
+            self.frames.append(self._uncertain_frame("switch", tok, err))
             return
         frame = Frame("switch", "seek", tok.where, value=value)
         self.frames.append(frame)
@@ -454,10 +468,9 @@ class DirectiveStream:
             if d.text == "#else":
                 frame.state = "run"
                 return
-            val, reason = self._paren_value(two=d.text == "#range")
+            val, err = self._paren_value(two=d.text == "#range")
             if val is None:
-                u = self._uncertain_frame("switch", d, reason)
-                frame.state, frame.certain, frame.reason = "all", False, u.reason
+                self._make_uncertain(frame, d, err)
                 return
             if d.text == "#case":
                 hit = abs(val - frame.value) < 1e-10
@@ -493,10 +506,9 @@ class DirectiveStream:
 
     def _loop_test(self, frame: Frame, tok: Token) -> None:
         """Evaluate a ``#while`` condition: read the body, or skip to its ``#end``."""
-        c, reason = self._condition()
+        c, err = self._condition()
         if c is None:
-            u = self._uncertain_frame("while", tok, reason, state="once")
-            frame.state, frame.certain, frame.reason = "once", False, u.reason
+            self._make_uncertain(frame, tok, err, state="once")
             self.frames.append(frame)
         elif c:
             self.frames.append(frame)
@@ -522,7 +534,7 @@ class DirectiveStream:
         except SdlEvalError as exc:
             if mark is not None and self.reset(mark):
                 self.skip_parens_raw()
-            self.frames.append(self._uncertain_frame("for", tok, str(exc), state="once"))
+            self.frames.append(self._uncertain_frame("for", tok, exc, state="once"))
             return
         self.symbols.declare(name.text, start, local=True)
         frame = Frame("for", "run", tok.where, mark=self.raw.mark(), value=end, step=step,

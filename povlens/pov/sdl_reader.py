@@ -102,17 +102,19 @@ class SceneReader:
     def _camera_statement(self, tok: Token) -> None:
         ds = self.stream
         certain = ds.certain
-        reason = ds.uncertain_reason()
+        reason, hint = ds.uncertain_reason(), ds.uncertain_hint()
         tainted = ds.tainted
         cam = parse_camera_block(ds, ds.expr, tok, declared=False, symbol=ds.symbols.get,
                                  version=ds.version, previous=self.previous_cam)
         self.camera_count += 1
         self.camera_frames = [f for f in ds.frames if f.kind in ("while", "for")]
         if not certain:
-            self.camera = UnknownValue(f"{tok.where}: the camera statement is inside {reason}")
+            self.camera = UnknownValue(f"{tok.where}: the camera statement is inside {reason}",
+                                       hint=hint)
             return
         if ds.tainted != tainted and not isinstance(cam, UnknownValue):
-            self.camera = UnknownValue(f"{tok.where}: the camera's items depend on {ds.last_reason}")
+            self.camera = UnknownValue(f"{tok.where}: the camera's items depend on {ds.last_reason}",
+                                       hint=ds.last_hint)
             return
         self.camera = cam
         if isinstance(cam, CameraState):

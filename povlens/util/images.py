@@ -1,9 +1,9 @@
 """Image files: reading renders as float32, writing EXR and sRGB PNG previews.
 
 All arrays are ``(H, W, C)`` float32 in *linear* light, row 0 = top of the
-image, column 0 = left (POV-Ray and OpenImageIO agree on this, reference
-§9.4).  POV-Ray's EXR output is half float; it is always read as float32 so
-that sums never accumulate in half precision (reference §9.3).
+image, column 0 = left (POV-Ray and OpenImageIO agree on this,
+docs/reference/povray-mesh-camera.md §9.4).  POV-Ray's EXR output is half float; it is
+always read as float32 so that sums never accumulate in half precision (§9.3 there).
 
 Every write goes to a temporary file in the destination folder that is
 renamed on success, so a half-written image never appears under the final
