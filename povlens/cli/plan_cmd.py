@@ -6,7 +6,7 @@ import math
 import tempfile
 
 from povlens.cli.common import print_json
-from povlens.cli.render_cmd import add_convert_arguments, options_from_args
+from povlens.cli.render_cmd import add_convert_arguments, options_from_args, print_notes
 from povlens.plan.convert import convert
 
 
@@ -43,6 +43,7 @@ def run(args) -> int:
             args.outdir = None
     d = plan.decision
     inp = plan.inputs
+    print_notes(plan)
     if args.json:
         print_json({"method": d.method, "samples": inp.samples, "focus": inp.focus,
                     "focus_from": inp.focus_from, "decision": d.to_dict(),
@@ -50,8 +51,6 @@ def run(args) -> int:
         return 0
     print(f"{inp.lens}  f/{plan.lens.f_number:.3g}  focus {inp.focus:g} {inp.units} (from "
           f"{inp.focus_from})  {inp.width}x{inp.height}  tolerance {inp.tolerance_px:g} px")
-    if plan.depth_probe is not None and plan.depth_probe.scene_atmosphere:
-        print(f"note: {plan.depth_probe.scene_atmosphere}")
     print(f"method {d.method}, {inp.samples} samples")
     for r in d.reasons:
         print(f"  {r}")

@@ -2,14 +2,21 @@
 
 The rendering commands import :mod:`povlens.rendering.samples` when they run: it loads
 OpenImageIO and tqdm (~0.3 s), which ``povlens convert`` does not need.
+
+What povlens replaces or ignores of the scene (the plan's ``notes``) is printed once
+per note on stderr, ``povlens: note: ...`` (:func:`print_notes`; ``render --quiet``
+prints none).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import sys
 
 from povlens.cli.common import positive_float, print_json
+from povlens.cli.flags import with_flags
 from povlens.errors import UsageError
 from povlens.lens.film import parse_film_size
 from povlens.lens.focus import UNITS_MM
@@ -37,6 +44,38 @@ def _pixel(text: str) -> tuple[int, int]:
     if x < 0 or y < 0:
         raise argparse.ArgumentTypeError(f"'{text}': the column and row count from 0")
     return x, y
+
+
+def _clock(text: str) -> float:
+    """A finite number: POV-Ray's clock (argparse type)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number")
+    return v
+
+
+def _add_povray_arguments(p: argparse.ArgumentParser) -> None:
+    """POV-Ray's own options, given to every POV-Ray run of the scene and kept in the
+    plan (``make`` and ``render-batch`` use them)."""
+    g = p.add_argument_group("POV-Ray options (every POV-Ray run of the scene; kept in "
+                             "plan.json)")
+    g.add_argument("--library-path", action="append", default=[], metavar="DIR",
+                   dest="library_paths",
+                   help="a folder where POV-Ray looks for #include files and image maps, "
+                        "as its +L (repeatable; after the scene's own folder)")
+    g.add_argument("--clock", type=_clock, metavar="V",
+                   help="POV-Ray's clock for the frame, as its +K (default: a still, "
+                        "clock 0); the scene's camera is read at it too")
+    g.add_argument("--povray-option", action="append", default=[], metavar="OPT",
+                   dest="povray_options",
+                   help="a further POV-Ray switch or INI option, e.g. +A0.3 or "
+                        "Jitter=off (repeatable; write --povray-option=-J for one "
+                        "starting with '-'); options povlens sets itself (image size, "
+                        "output, display, threads, animation) are refused; mesh lens "
+                        "samples ignore anti-aliasing")
 
 
 def add_convert_arguments(p: argparse.ArgumentParser) -> None:
@@ -99,6 +138,7 @@ def add_convert_arguments(p: argparse.ArgumentParser) -> None:
                         "it saved no time at equal error")
     p.add_argument("-o", "--outdir", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
+    _add_povray_arguments(p)
 
 
 def options_from_args(args) -> ConvertOptions:
@@ -122,13 +162,21 @@ def options_from_args(args) -> ConvertOptions:
         real_focus=not args.thick_lens_focus, vignetting=not args.no_vignetting,
         jitter=not args.no_jitter, tolerance_px=args.tolerance,
         auto_samples=args.samples is None,
-        adaptive=bool(args.adaptive))
+        adaptive=bool(args.adaptive),
+        library_paths=tuple(args.library_paths), clock=args.clock,
+        povray_options=tuple(args.povray_options))
+
+
+def print_notes(plan: Plan) -> None:
+    """Print the plan's notes (what povlens replaces or ignores), each once, on stderr
+    as ``povlens: note: ...`` with parameters written as options."""
+    for note in dict.fromkeys(plan.notes):
+        print(f"povlens: note: {with_flags(note)}", file=sys.stderr)
 
 
 def _summary(plan: Plan) -> str:
     f, m, e = plan.focus, plan.thin_lens, plan.model_error
     cam = plan.povray_camera
-    atmosphere = plan.depth_probe.scene_atmosphere if plan.depth_probe is not None else None
     return "\n".join([
         f"lens {plan.inputs.lens}  f/{plan.lens.f_number:.3g}  EFL {plan.lens.efl_mm:.2f} mm",
         f"focus {plan.inputs.focus:.6g} {plan.inputs.units} (from "
@@ -143,11 +191,12 @@ def _summary(plan: Plan) -> str:
         f"method {plan.inputs.method}, {plan.inputs.samples} samples"
         + (" (chosen by --method auto: " + plan.decision.reasons[-1].removeprefix("-> ")
            + ")" if plan.decision is not None else ""),
-    ] + ([f"note: {atmosphere}"] if atmosphere else []))
+    ])
 
 
 def run_convert(args) -> int:
     plan = convert(options_from_args(args))
+    print_notes(plan)
     if args.json:
         print_json(plan.to_dict())
     else:
@@ -159,9 +208,13 @@ def run_convert(args) -> int:
 
 def run_render(args) -> int:
     from povlens.rendering.samples import convert_and_render
+
+    def on_plan(plan: Plan) -> None:
+        print_notes(plan)
+        print(_summary(plan))
+
     _, out = convert_and_render(options_from_args(args), jobs=args.jobs, quiet=args.quiet,
-                                on_plan=None if args.quiet else
-                                (lambda plan: print(_summary(plan))))
+                                on_plan=None if args.quiet else on_plan)
     if not args.quiet:
         print(f"wrote {out} and {out.with_suffix('.png')}")
     return 0

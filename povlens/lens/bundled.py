@@ -78,6 +78,7 @@ class BundledLens:
     source: str
 
     def to_dict(self) -> dict:
+        """The fields as a JSON-ready dict."""
         return dataclasses.asdict(self)
 
 
@@ -183,7 +184,8 @@ def bundled_lenses(film_diagonal_mm: float = DEFAULT_FILM_DIAGONAL_MM) -> list[B
     Returns
     -------
     list of BundledLens
-        Sorted by name.
+        In file-name order (``dgauss.50mm.dat`` before ``dgauss.dat``, which
+        ``SOURCES.md`` describes as "the same double Gauss, 100 mm scale").
     """
     folder = bundled_lens_folder()
     sources = lens_sources(folder / "SOURCES.md")

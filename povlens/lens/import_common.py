@@ -216,6 +216,13 @@ def build_lens(rows: list[SourceRow], source: str, comments: list[str]) -> Impor
         raise LensFileError(source, None, "contains no lens surfaces")
     for i, row in enumerate(rows):
         _check_row(row, i == len(rows) - 1, source)
+    if len(rows) > 1 and rows[0].thickness_mm == 0 and rows[-1].thickness_mm != 0:
+        # read_lens takes a first thickness 0 with a last one not 0 for an old Kolb table
+        # (column 2 shifted); the last thickness (to the film) is replaced when focusing.
+        last = rows[-1]
+        rows = rows[:-1] + [dataclasses.replace(
+            last, thickness_mm=0.0, note=f"{last.note}; the design's {last.thickness_mm:.6g} mm "
+            f"to the image written as 0 (povlens focuses)")]
     if rows[-1].index_after != AIR:
         raise LensFileError(source, rows[-1].line,
                             f"{rows[-1].label}: the medium after the last surface has index "

@@ -36,7 +36,8 @@ from povlens.errors import LensFileError, ParameterError
 from povlens.lens.import_common import ImportedLens, SourceRow, build_lens, decode_text
 from povlens.lens.prescription import LensPrescription
 
-__all__ = ["FLAT_RADIUS_MM", "LentilEntry", "list_lentil", "import_lentil", "read_lentil"]
+__all__ = ["FLAT_RADIUS_MM", "LentilEntry", "list_lentil", "import_lentil", "read_lentil",
+           "list_hint"]
 
 #: Radii of this magnitude or more are flat faces (lentil stores the patents' "infinity"
 #: as 9999, 99999, 100000 or 1e6).
@@ -44,7 +45,11 @@ FLAT_RADIUS_MM = 9999.0
 
 PATENT_TABLE = "optical-elements-patent"
 ADJUSTED_TABLE = "optical-elements-adjusted"
-LIST_HINT = "list the ids with: povlens import-lens FILE --list"
+
+
+def list_hint(path) -> str:
+    """How to see the ids of the database at ``path``."""
+    return f"list the ids with: povlens import-lens {path} --list"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,6 +65,7 @@ class LentilEntry:
     has_adjusted: bool
 
     def to_dict(self) -> dict:
+        """The fields as a JSON-ready dict."""
         return dataclasses.asdict(self)
 
 
@@ -200,7 +206,7 @@ def import_lentil(path: str | os.PathLike, lens_id: str, adjusted: bool = False)
         some = ", ".join(list(data)[:8]) + (", ..." if len(data) > 8 else "")
         raise ParameterError("lens_id", lens_id,
                              f"lens_id={lens_id!r}: {path} has no entry {lens_id!r} "
-                             f"(its ids: {some})", LIST_HINT)
+                             f"(its ids: {some})", list_hint(path))
     e = data[lens_id]
     table_name = ADJUSTED_TABLE if adjusted else PATENT_TABLE
     table = e.get(table_name)

@@ -68,7 +68,6 @@ OTHER_APERTURES = {"OBSC": "an obscuration", "SQAP": "a rectangular aperture",
 #: even when it is not indented).
 SURFACE_KEYWORDS = {"TYPE", "STOP", "CURV", "CONI", "PARM", "DISZ", "GLAS", "DIAM", "MEMA",
                     "CLAP", "COAT", "COMM", "SCBD", "XDAT", *OTHER_APERTURES}
-GLASS_HINT = "give its nd (and vd) with 'glasses'"
 
 
 @dataclasses.dataclass
@@ -240,6 +239,8 @@ def _check_shape(s: ZmxSurface, source: str) -> None:
                "axis only; remove it in the design program or pick another design"):
         raise LensFileError(source, s.line, f"{s.label}: {reason}", hint)
 
+    if s.glass and s.glass[0].upper() == "MIRROR":
+        refuse("a mirror (GLAS MIRROR); povlens imports refracting lenses only")
     if s.type == "EVENASPH":
         terms = {k: v for k, v in s.parms.items() if v != 0}
         if terms:
@@ -256,8 +257,6 @@ def _check_shape(s: ZmxSurface, source: str) -> None:
         refuse(f"conic constant {s.conic:g} (a conic is not a sphere)")
     if s.tilted:
         refuse(f"tilted or decentered (SCBD, line {s.tilted})")
-    if s.glass and s.glass[0].upper() == "MIRROR":
-        refuse("a mirror (GLAS MIRROR); povlens imports refracting lenses only")
     if s.thickness is not None and math.isinf(s.thickness):
         refuse("thickness INFINITY inside the lens")
 
@@ -296,7 +295,8 @@ def _media(lens: list[ZmxSurface], glasses: dict, source: str) -> list[tuple[flo
             source, missing[0].glass_line,
             f"surface{'s' if len(missing) > 1 else ''} {where}: glass "
             f"{', '.join(names)} has no refractive index in the file (only Zemax's "
-            f"placeholder nd 1.5, vd 40) and povlens has no glass catalogue", GLASS_HINT)
+            f"placeholder nd 1.5, vd 40) and povlens has no glass catalogue",
+            f"give its catalogue nd (and vd) with 'glasses': {names[0]}=ND,VD")
     for s, m in zip(lens, media):
         if not 1.0 <= m[0] <= 10.0:
             raise LensFileError(source, s.glass_line,
@@ -442,7 +442,7 @@ def import_zmx(path: str | os.PathLike, glasses: dict | None = None) -> Imported
     if not stops:
         raise LensFileError(source, None, "no surface is marked STOP (the aperture stop)",
                             "mark the aperture stop in the design program and export again")
-    if len(stops) > 1 or stops[0] in (f.surfaces[0], f.surfaces[-1]):
+    if len(stops) > 1 or stops[0] is f.surfaces[0] or stops[0] is f.surfaces[-1]:
         raise LensFileError(source, stops[-1].line, "the STOP must be one lens surface, not the "
                             "object or image surface, and only one")
     if f.configurations > 1:

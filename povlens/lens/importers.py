@@ -13,7 +13,7 @@ from pathlib import Path
 
 from povlens.errors import LensFileError, ParameterError
 from povlens.lens.import_common import ImportedLens, decode_text
-from povlens.lens.import_lentil import LIST_HINT, import_lentil, list_lentil
+from povlens.lens.import_lentil import import_lentil, list_hint, list_lentil
 from povlens.lens.import_zemax import import_zmx
 
 __all__ = ["LENTIL", "ZEMAX", "source_format", "import_lens_file"]
@@ -90,7 +90,7 @@ def import_lens_file(path: str | os.PathLike, *, lens_id: str | None = None,
             entries = list_lentil(path)
             if len(entries) != 1:
                 raise ParameterError("lens_id", None, f"'lens_id' is needed: {path} holds "
-                                     f"{len(entries)} lenses", LIST_HINT)
+                                     f"{len(entries)} lenses", list_hint(path))
             lens_id = entries[0].lens_id
         imported = import_lentil(path, lens_id, adjusted)
     else:

@@ -34,6 +34,7 @@ from povlens.plan.adaptive import adaptive_rows
 from povlens.plan.decision import decide, model_depths, probe_image_error
 from povlens.plan.depth_probe import DepthProbe, ProbeView, axial_depth, depth_limits, start_probe
 from povlens.plan.fixed import start_plan
+from povlens.plan.options import povray_options_of
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pupil.storage import cached_pupil_table
 from povlens.thinlens.model_error import measure_model_error
@@ -59,8 +60,9 @@ def start_depth_probe(opts, film: Film, plan, threads: int = 1) -> DepthProbe:
     ``plan`` is a :class:`~povlens.plan.schema.Plan` of ``opts`` (any method) or
     the :class:`~povlens.plan.fixed.PlanStart` of one: its ``povray_camera`` is
     the probe's, since the probe's film is the same in mm; only the pixels
-    differ.  Besides the three depth renders, the view as it is is rendered
-    (``image`` of the probe: the vignetting's effect on the image) when the lens's
+    differ.  Every render gets the user's POV-Ray options (``opts.library_paths``,
+    ``clock``, ``povray_options``).  Besides the three depth renders, the view as it
+    is is rendered (``image`` of the probe: the vignetting's effect on the image) when the lens's
     vignetting is wanted (``opts.vignetting``); with ``--no-vignetting`` nothing
     reads it, and the probe is one POV-Ray process fewer.  The renders run in a
     temporary folder ``.probe.*`` in OUTDIR (``threads`` POV-Ray threads each).
@@ -74,7 +76,8 @@ def start_depth_probe(opts, film: Film, plan, threads: int = 1) -> DepthProbe:
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
     view = ProbeView(plan.povray_camera, Film(film.width_mm, film.height_mm, pw, ph),
-                     plan.mm_per_unit, str(Path(opts.scene).resolve()), float(opts.focus))
+                     plan.mm_per_unit, str(Path(opts.scene).resolve()), float(opts.focus),
+                     povray_options_of(opts))
     return start_probe(view, out, threads=threads, keep_wrappers=False, prefix=".probe.",
                        label=str(opts.scene), with_image=bool(getattr(opts, "vignetting", True)))
 

@@ -126,7 +126,8 @@ def _probe_window(opts: ConvertOptions, st: PlanStart, x: float, y: float,
                   fade: float) -> tuple[np.ndarray, ProbeView]:
     """Axial distances (WINDOW, WINDOW) along ``st``'s axis of the window at (x, y)."""
     cam, film = window_camera(st.povray_camera, st.film, x, y)
-    view = ProbeView(cam, film, st.mm_per_unit, str(Path(opts.scene).resolve()), fade)
+    view = ProbeView(cam, film, st.mm_per_unit, str(Path(opts.scene).resolve()), fade,
+                     st.povray)                    # the user's POV-Ray options
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
     d = start_probe(view, out, fade_distance=fade, keep_wrappers=False, prefix=".focus.",

@@ -26,7 +26,7 @@ from povlens.plan.autofocus import resolve_focus
 from povlens.plan.depth_probe import depth_limits, probe_record
 from povlens.plan.fixed import (PlanStart, finish_plan, make_plan, make_plan_with_lens,
                                 run_in_background, start_plan)
-from povlens.plan.options import METHODS, ConvertOptions
+from povlens.plan.options import METHODS, ConvertOptions, with_povray_options_checked
 from povlens.plan.render_folder import write_folder
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pov.executable import povray_version
@@ -187,6 +187,7 @@ def convert(opts: ConvertOptions, render_early=None) -> Plan:
     left half-written.
     """
     opts = dataclasses.replace(opts, scene=str(resolve_scene_path(opts.scene)))
+    opts = with_povray_options_checked(opts)              # before any POV-Ray run
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
     opts, focus_info = resolve_focus(opts)                # option, camera, or depth probe
@@ -203,7 +204,9 @@ def convert(opts: ConvertOptions, render_early=None) -> Plan:
         if choice is not None:
             range_info = choice.decision.numbers.get("depth_probe")
         if focus_info is not None or range_info is not None:
-            plan.depth_probe = probe_record(opts.scene, range_info, focus_info)
+            plan.depth_probe = probe_record(opts.scene, range_info, focus_info,
+                                            library_paths=opts.library_paths)
+            plan.add_note(plan.depth_probe.scene_atmosphere)   # the probe's blind spot
         if choice is not None:
             req = choice.requested
             plan.record_auto_choice(choice.decision, req.tolerance_px, req.auto_samples)

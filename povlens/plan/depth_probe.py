@@ -34,6 +34,12 @@ three renders set ``assumed_gamma 1`` before the scene (POV-Ray keeps the first
 ``assumed_gamma`` it reads): the EXR then holds the sums of light linearly, whatever
 gamma the scene asks for.
 
+**The user's POV-Ray options** (:class:`ProbeView`'s ``povray_options``: library
+paths, clock, passthrough options) go to every render of the probe, so it sees the
+scene POV-Ray renders with them; :data:`PROBE_SWITCHES` come after them and win
+(``+Q6``, and ``-A``: anti-aliasing supersamples where neighbouring pixels differ,
+which is not the same pixels in the three renders).
+
 **Background** is made transparent (``background`` and ``sky_sphere`` fully
 transmitting, after the scene) and the renders write alpha (``+UA``): a pixel whose
 ray hits nothing has alpha 0 and is infinitely far (``inf``).
@@ -79,8 +85,10 @@ import numpy as np
 
 from povlens.errors import PovlensError
 from povlens.lens.film import Film
+from povlens.plan.options import povray_options_of
 from povlens.plan.schema import DepthProbeRecord, Plan, PovrayCamera, read_plan
 from povlens.pov.mesh import pinhole_wrapper
+from povlens.pov.povray_options import PovrayOptions
 from povlens.pov.process import start_render
 from povlens.pov.sdl_text import pov_vector
 from povlens.util.files import write_text
@@ -96,9 +104,10 @@ __all__ = ["ProbeView", "probe_depth", "start_probe", "DepthProbe", "probe_wrapp
 FADE_POWER = 1.0
 #: Colour (all channels) of the probe's light: B2 - B0 large against B0, B1 << 65504.
 LIGHT_COLOUR = 1000.0
-#: POV-Ray switches of the three renders: transmitted rays but no reflections, media,
-#: fog or radiosity (+Q6), alpha marks background (+UA).
-PROBE_SWITCHES = ("+Q6", "+UA")
+#: POV-Ray switches of the three renders, after the user's options: transmitted rays but
+#: no reflections, media, fog or radiosity (+Q6), alpha marks background (+UA), no
+#: anti-aliasing (-A: the same rays in the three renders).
+PROBE_SWITCHES = ("+Q6", "+UA", "-A")
 #: Largest relative error of r (from half-float rounding) a pixel's depth may have.
 RATIO_TOLERANCE = 0.05
 #: Alpha at or below which a pixel without depth is background (its ray hit nothing).
@@ -129,7 +138,8 @@ class ProbeView:
     ``povray_camera`` is the plan's (or any perspective camera: location, direction,
     right, up in scene units); ``film`` the probe's (its pixels set the image size;
     the plan's film in mm); ``scene`` the scene file and ``focus`` the focus distance
-    (scene units; the default fade distance).  A :class:`~povlens.plan.schema.Plan`
+    (scene units; the default fade distance); ``povray_options`` the user's POV-Ray
+    options, given to every render of the probe.  A :class:`~povlens.plan.schema.Plan`
     has the attributes :func:`ray_directions` and :func:`axial_depth` read, too.
     """
 
@@ -138,6 +148,7 @@ class ProbeView:
     mm_per_unit: float
     scene: str
     focus: float
+    povray_options: PovrayOptions = PovrayOptions()
 
     @classmethod
     def of_plan(cls, plan: Plan, width_px: int | None = None,
@@ -148,7 +159,7 @@ class ProbeView:
         film = Film(f.width_mm, f.height_mm, int(width_px or f.width_px),
                     int(height_px or f.height_px))
         return cls(plan.povray_camera, film, plan.mm_per_unit, plan.inputs.scene,
-                   float(plan.inputs.focus))
+                   float(plan.inputs.focus), povray_options_of(plan.inputs))
 
 
 def probe_wrapper(linear_pinhole_text: str, eye, fade_distance: float | None,
@@ -274,9 +285,11 @@ _INCLUDE = re.compile(r'#\s*include\s+"([^"]+)"')
 _COMMENTS = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:[^"\\\n]|\\.)*"', re.S)
 
 
-def scene_atmosphere(scene: str | os.PathLike, _seen: set | None = None) -> list[str]:
+def scene_atmosphere(scene: str | os.PathLike, _seen: set | None = None,
+                     library_paths=()) -> list[str]:
     """Which of ``fog`` and ``media`` the scene's text (and the files it includes from
-    its own folder) writes, sorted; a text scan, not an evaluation of the scene."""
+    its own folder or ``library_paths``) writes, sorted; a text scan, not an
+    evaluation of the scene."""
     path = Path(scene)
     seen = set() if _seen is None else _seen
     if path.resolve() in seen or len(seen) > 200:
@@ -287,21 +300,23 @@ def scene_atmosphere(scene: str | os.PathLike, _seen: set | None = None) -> list
     except OSError:
         return []
     found = set()
+    folders = [path.parent, *map(Path, library_paths)]
     for name in _INCLUDE.findall(text):
-        inc = path.parent / name
-        if inc.is_file():
-            found.update(scene_atmosphere(inc, seen))
+        inc = next((f / name for f in folders if (f / name).is_file()), None)
+        if inc is not None:
+            found.update(scene_atmosphere(inc, seen, library_paths))
     code = _COMMENTS.sub(lambda m: "" if m.group(0).startswith("/") else '""', text)
     found.update(m.group(1) for m in _ATMOSPHERE.finditer(code))
     return sorted(found)
 
 
 def probe_record(scene: str | os.PathLike, depth_range: dict | None = None,
-                 focus: dict | None = None) -> DepthProbeRecord:
+                 focus: dict | None = None, library_paths=()) -> DepthProbeRecord:
     """The plan.json record of the probes run for a plan of ``scene``: the method, how
     pixels without depth count, the note on the scene's own fog / media (only if its
-    text has them) and the probes' numbers (``depth_range``, ``focus``)."""
-    found = scene_atmosphere(scene)
+    text, or a file it includes from its folder or ``library_paths``, has them) and the
+    probes' numbers (``depth_range``, ``focus``)."""
+    found = scene_atmosphere(scene, library_paths=library_paths)
     note = None
     if found:
         note = (f"the scene has {' and '.join(found)}: the depth probe does not see "
@@ -377,12 +392,14 @@ def start_probe(view: ProbeView, folder: str | os.PathLike, *,
                              probe_wrapper(linear, cam.location, fade, light))
             probe._jobs[name] = start_render(pov, tmp / f"{name}.exr", w, h, threads=1,
                                              library_paths=[scene.parent],
+                                             povray_options=view.povray_options,
                                              extra_args=PROBE_SWITCHES)
         if with_image:
             base = pinhole_wrapper(include, cam.location, cam.direction, cam.right, cam.up)
             pov = write_text(wrappers / "depth_view.pov", base)
             probe._jobs["view"] = start_render(pov, tmp / "view.exr", w, h, threads=threads,
-                                               library_paths=[scene.parent])
+                                               library_paths=[scene.parent],
+                                               povray_options=view.povray_options)
     except BaseException:
         probe.cancel()
         raise

@@ -12,6 +12,13 @@ Scene units: ``units`` says what one scene unit is (the lens is in mm).  The
 focus distance is measured from the camera ``location``, where the lens's
 entrance pupil is placed.  Without ``focus``, :func:`start_plan` takes it from the
 camera (:func:`camera_focus`); :mod:`povlens.plan.autofocus` measures it otherwise.
+
+The scene's camera gives the position and orientation; the lens replaces its
+projection, whatever its type.  Its proportions follow POV-Ray's rule
+(:func:`film_of`): when |right|/|up| differs from the image's width/height, the film
+takes the camera's proportions and the image keeps its pixels, which are then not
+square, so the picture is stretched as POV-Ray stretches it.  What of the camera
+povlens replaces or ignores becomes the plan's ``notes``.
 """
 
 from __future__ import annotations
@@ -30,18 +37,28 @@ from povlens.lens.film import Film
 from povlens.lens.focus import UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_mm
 from povlens.lens.paraxial import paraxial_data, stopped_down
 from povlens.lens.prescription import LensPrescription, read_lens
-from povlens.plan.options import METHODS, ConvertOptions
+from povlens.plan.options import METHODS, ConvertOptions, povray_options_of
 from povlens.plan.schema import (CameraPlacement, FocusSolution, Inputs, LensSummary, Plan,
                                  PovrayCamera, PovraySettings)
 from povlens.pov.mesh import default_sink_centre, render_size
 from povlens.pov.executable import povray_version
-from povlens.pov.scene_camera import parse_scene_camera
+from povlens.pov.povray_options import PovrayOptions
+from povlens.pov.scene_camera import ASPECT_TOLERANCE, parse_scene_camera
 from povlens.pupil.storage import cached_pupil_table
 from povlens.thinlens.model import EquivalentThinLens, fit_thin_lens
 from povlens.thinlens.model_error import measure_model_error
 
 __all__ = ["PlanStart", "start_plan", "finish_plan", "make_plan", "make_plan_with_lens",
-           "camera_focus", "round_robin_batches", "run_in_background"]
+           "camera_focus", "film_of", "camera_notes", "round_robin_batches",
+           "run_in_background", "MESH_ANTIALIAS_NOTE"]
+
+#: The note of a mesh plan whose ``povray_options`` turn anti-aliasing on.
+MESH_ANTIALIAS_NOTE = (
+    "povray_options={option!r} turns anti-aliasing on, which the mesh render's lens "
+    "samples do not use: POV-Ray's anti-aliasing shoots rays between pixels, which "
+    "the mesh camera takes from the neighbouring pixels' faces; povlens renders them "
+    "with -A, and its lens samples, jittered within each pixel, anti-alias the image "
+    "(the views, the pinhole and focal-blur methods, use the option)")
 
 
 def _unit(v) -> np.ndarray:
@@ -56,7 +73,9 @@ def _scene_camera(opts: ConvertOptions):
     """The scene's camera, or None when the options give location and look_at."""
     if opts.location is not None or opts.look_at is not None:
         return None
-    return parse_scene_camera(opts.scene, opts.width, opts.height)
+    # the user's library paths and clock: the camera POV-Ray renders with them
+    return parse_scene_camera(opts.scene, opts.width, opts.height,
+                              library_paths=opts.library_paths, clock=opts.clock)
 
 
 def _camera_focus(opts: ConvertOptions, cam) -> tuple[float, str] | None:
@@ -115,10 +134,7 @@ def _camera_basis(opts: ConvertOptions, cam):
         right = _unit(right)
         up = np.cross(fwd, right)
         return loc, right, up, fwd, "command line"
-    if cam.projection != "perspective":
-        raise UsageError(f"{cam.source}: the scene's camera is {cam.projection}; povlens replaces "
-                         f"it with a lens and needs its position and orientation",
-                         "give 'location', 'look_at' and 'sky'")
+    # any camera type: the lens replaces its projection (a note says so)
     return (np.asarray(cam.location, float), _unit(cam.right), _unit(cam.up),
             _unit(cam.forward), cam.source)
 
@@ -170,6 +186,8 @@ class PlanStart:
     povray_camera: PovrayCamera
     focus: float = math.nan            # the focus distance, scene units
     focus_from: str = "option"         # where it came from (Inputs.focus_from)
+    povray: PovrayOptions = PovrayOptions()  # the user's POV-Ray options, checked
+    notes: list[str] = dataclasses.field(default_factory=list)  # Plan.notes of the camera
 
 
 def _vector(a) -> tuple[float, float, float]:
@@ -203,16 +221,14 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
     if not Path(opts.scene).is_file():
         raise UsageError(f"scene file {opts.scene} does not exist", "check the path")
     mm_per_unit = UNITS_MM[opts.units]
+    povray = povray_options_of(opts)      # checked before any POV-Ray run or scene read
+    opts = dataclasses.replace(opts, library_paths=povray.library_paths, clock=povray.clock,
+                               povray_options=povray.extra_options)
     lens = stopped_down(read_lens(opts.lens), stop_diameter_mm=opts.stop_diameter_mm,
                         f_number=opts.f_number)
     p = paraxial_data(lens)
-    if opts.film_size_mm is not None:
-        film = Film(float(opts.film_size_mm[0]), float(opts.film_size_mm[1]),
-                    int(opts.width), int(opts.height))
-    else:
-        film = Film.from_diagonal(opts.film_diagonal_mm, opts.width, opts.height)
-
     cam = _scene_camera(opts)
+    film, proportions = film_of(opts, cam)
     focus, focus_from = _focus_of(opts, cam)
     focus_mm = focus * mm_per_unit
     film_d, object_d, thick_d, spot = _focus(lens, p, focus_mm, opts.real_focus)
@@ -227,7 +243,82 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
                         if math.isfinite(model.focus_distance_mm) else 1e9),
         hfov_deg=math.degrees(2 * math.atan(0.5 * film.width_mm / model.image_distance_mm)))
     return PlanStart(mm_per_unit, lens, p, film, focus_mm, film_d, object_d, thick_d, spot,
-                     model, loc, right, up, fwd, cam_source, camera, focus, focus_from)
+                     model, loc, right, up, fwd, cam_source, camera, focus, focus_from,
+                     povray, camera_notes(cam, proportions))
+
+
+#: How the scene-camera reader's note on the camera's proportions begins
+#: (:func:`camera_notes` replaces it with :func:`film_of`'s, which says what povlens does).
+_READER_PROPORTIONS_NOTE = "the camera's proportions"
+
+
+def _camera_proportions(cam, width: int, height: int) -> float | None:
+    """|right|/|up| of scene camera ``cam`` when POV-Ray would stretch the image to it
+    (a perspective or orthographic camera whose proportions differ from the image's
+    by more than :data:`~povlens.pov.scene_camera.ASPECT_TOLERANCE`), else None."""
+    if cam is None or cam.projection not in ("perspective", "orthographic"):
+        return None
+    r = float(np.linalg.norm(cam.right_vector))
+    u = float(np.linalg.norm(cam.up_vector))
+    if not (r > 0 and u > 0 and math.isfinite(r / u)):
+        return None
+    ratio = r / u
+    return None if abs(ratio / (width / height) - 1.0) <= ASPECT_TOLERANCE else ratio
+
+
+def film_of(opts: ConvertOptions, cam) -> tuple[Film, str | None]:
+    """The film of a conversion, and a note when the camera's proportions set it.
+
+    Parameters
+    ----------
+    opts : the options: ``film_size_mm``, else ``film_diagonal_mm``; ``width`` x
+        ``height`` pixels.
+    cam : the scene camera (:class:`~povlens.pov.scene_camera.SceneCamera`), or None.
+
+    Returns
+    -------
+    (Film, str or None)
+        POV-Ray's rule: the image spans the camera's ``right`` x ``up`` whatever its
+        pixels, so when |right|/|up| differs from width/height (beyond
+        :data:`~povlens.pov.scene_camera.ASPECT_TOLERANCE`) the film of the diagonal
+        takes the camera's proportions and the pixels are not square: the picture is
+        stretched as POV-Ray stretches it (the note says so).  ``film_size_mm`` is
+        kept as given; the note then says the camera's proportions are not used.
+        Otherwise the film takes the image's proportions (square pixels), no note.
+    """
+    w, h = int(opts.width), int(opts.height)
+    if w < 1 or h < 1:
+        return Film.from_diagonal(opts.film_diagonal_mm, w, h), None   # raises
+    ratio = _camera_proportions(cam, w, h)
+    differ = None if ratio is None else (
+        f"the camera's proportions |right|/|up| = {ratio:.4g} ({cam.source}) differ from "
+        f"the image's {w}x{h} ({w / h:.4g})")
+    if opts.film_size_mm is not None:
+        fw, fh = (float(v) for v in opts.film_size_mm)
+        note = None if differ is None else (
+            f"{differ}: film_size_mm={fw:g},{fh:g} sets the film instead (POV-Ray would "
+            f"stretch the picture to the camera's proportions)")
+        return Film(fw, fh, w, h), note
+    square = Film.from_diagonal(opts.film_diagonal_mm, w, h)          # validates
+    if ratio is None:
+        return square, None
+    fw = float(opts.film_diagonal_mm) / math.hypot(1.0, 1.0 / ratio)
+    film = Film(fw, fw / ratio, w, h)
+    tall = (film.height_mm / h) / (film.width_mm / w)
+    return film, (f"{differ}: as POV-Ray does, the film takes the camera's proportions "
+                  f"({film.width_mm:.4g} x {film.height_mm:.4g} mm) and the image's pixels "
+                  f"are {tall:.4g} times as tall as wide, so the picture is stretched as "
+                  f"POV-Ray stretches it; for square pixels give the image the camera's "
+                  f"proportions, or write 'right x*image_width/image_height' in the scene")
+
+
+def camera_notes(cam, proportions_note: str | None = None) -> list[str]:
+    """What of scene camera ``cam`` povlens replaces or ignores: the reader's notes
+    (``cam.replaced``), its note on the proportions replaced by ``proportions_note``
+    (:func:`film_of`'s); empty without a scene camera."""
+    notes = [] if cam is None else [n for n in getattr(cam, "replaced", ())
+                                    if not n.startswith(_READER_PROPORTIONS_NOTE)]
+    return notes + ([proportions_note] if proportions_note else [])
 
 
 def _focus_of(opts: ConvertOptions, cam) -> tuple[float, str]:
@@ -288,7 +379,18 @@ def _inputs(opts: ConvertOptions, st: PlanStart) -> Inputs:
         batch_size=opts.batch_size, seed=opts.seed, real_focus=opts.real_focus,
         vignetting=opts.vignetting, jitter=opts.jitter, adaptive=bool(opts.adaptive),
         camera_from=st.camera_from, focus_from=st.focus_from,
-        focus_at=None if opts.focus_at is None else tuple(int(v) for v in opts.focus_at))
+        focus_at=None if opts.focus_at is None else tuple(int(v) for v in opts.focus_at),
+        library_paths=st.povray.library_paths, clock=st.povray.clock,
+        povray_options=st.povray.extra_options)
+
+
+def _antialias_note(opts: ConvertOptions, st: PlanStart) -> str | None:
+    """:data:`MESH_ANTIALIAS_NOTE` for a mesh plan whose options turn anti-aliasing on."""
+    if opts.method != "mesh" or not st.povray.antialiasing():
+        return None
+    last = [o for o in st.povray.extra_options
+            if PovrayOptions(extra_options=(o,)).antialiasing() is not None][-1]
+    return MESH_ANTIALIAS_NOTE.format(option=last)
 
 
 def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_error=None,
@@ -342,7 +444,8 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_
         thin_lens=model, povray_camera=st.povray_camera, model_error=model_error,
         povray=PovraySettings(version, rw, rh, drop),
         sink_centre=_vector(default_sink_centre(st.location, st.forward)),
-        batches=round_robin_batches(opts.samples, opts.batch_size))
+        batches=round_robin_batches(opts.samples, opts.batch_size), notes=list(st.notes))
+    plan.add_note(_antialias_note(opts, st))
     return plan, table
 
 

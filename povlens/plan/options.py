@@ -1,10 +1,17 @@
-"""What a conversion is asked for: :class:`ConvertOptions` and the render methods."""
+"""What a conversion is asked for: :class:`ConvertOptions` and the render methods.
+
+The user's own POV-Ray options (``library_paths``, ``clock``, ``povray_options``) go
+to every POV-Ray run of the scene: the depth probes, the views, the lens samples
+(:func:`povray_options_of`); the plan records them (:class:`~povlens.plan.schema.Inputs`).
+"""
 
 from __future__ import annotations
 
 import dataclasses
 
-__all__ = ["ConvertOptions", "METHODS"]
+from povlens.pov.povray_options import PovrayOptions
+
+__all__ = ["ConvertOptions", "METHODS", "povray_options_of", "with_povray_options_checked"]
 
 #: Render methods: ``auto`` chooses one of the other three from measurements.
 METHODS = ("auto", "pinhole", "focal-blur", "mesh")
@@ -44,3 +51,38 @@ class ConvertOptions:
     focus_at: tuple[int, int] | None = None  # focus None: focus on what the depth probe sees
                                        # at output pixel (column, row), 0-based from top left
     focus_from: str | None = None      # where a resolved focus came from (None: the option)
+    library_paths: tuple[str, ...] = ()  # POV-Ray's +L: folders for #include files
+    clock: float | None = None         # POV-Ray's +K: the frame's clock (None: a still, 0)
+    povray_options: tuple[str, ...] = ()  # further POV-Ray options, e.g. ("+A0.3",)
+
+
+def povray_options_of(opts) -> PovrayOptions:
+    """The user's POV-Ray options of a conversion or of a plan's inputs.
+
+    Parameters
+    ----------
+    opts : :class:`ConvertOptions` or :class:`~povlens.plan.schema.Inputs` (both have
+        ``library_paths``, ``clock`` and ``povray_options``).
+
+    Returns
+    -------
+    PovrayOptions
+        Checked (:class:`~povlens.pov.povray_options.PovrayOptions`): library paths
+        absolute, the clock a float.
+
+    Raises
+    ------
+    ParameterError
+        A library path naming no folder (``library_paths``), a clock that is not a
+        finite number (``clock``), or an option povlens controls (``povray_options``).
+    """
+    return PovrayOptions(library_paths=opts.library_paths, clock=opts.clock,
+                         extra_options=opts.povray_options)
+
+
+def with_povray_options_checked(opts: ConvertOptions) -> ConvertOptions:
+    """``opts`` with its POV-Ray options checked and normalised as the plan stores
+    them (:func:`povray_options_of`: absolute library paths, a float clock, tuples)."""
+    checked = povray_options_of(opts)
+    return dataclasses.replace(opts, library_paths=checked.library_paths, clock=checked.clock,
+                               povray_options=checked.extra_options)

@@ -88,7 +88,11 @@ class Inputs:
     when ``--method auto`` chose them.  ``focus_from`` says where ``focus`` came from
     (``"option"``, ``"focal_point"``, ``"look_at"``, ``"depth probe at centre"``,
     ``"depth probe at X,Y"``: :mod:`povlens.plan.autofocus`), ``focus_at`` the
-    output pixel (column, row) focused on; both None in plans written before them."""
+    output pixel (column, row) focused on; both None in plans written before them.
+    ``library_paths``, ``clock`` and ``povray_options`` are the user's POV-Ray options
+    (:func:`povlens.plan.options.povray_options_of`), which every POV-Ray run of the
+    folder gets (``make``, ``povlens render-batch``); written only when set, empty in
+    plans written before them."""
 
     scene: str
     lens: str
@@ -115,22 +119,30 @@ class Inputs:
     auto_samples: bool | None = None
     focus_from: str | None = None
     focus_at: tuple[int, int] | None = None
+    library_paths: tuple[str, ...] = ()
+    clock: float | None = None
+    povray_options: tuple[str, ...] = ()
 
-    #: Fields written only when set (--method auto's, and the focus's source).
-    AUTO_FIELDS = ("requested_method", "tolerance_px", "auto_samples", "focus_from", "focus_at")
+    #: Fields written only when set (--method auto's, the focus's source, and the
+    #: user's POV-Ray options): a plan without them reads and writes back unchanged.
+    AUTO_FIELDS = ("requested_method", "tolerance_px", "auto_samples", "focus_from", "focus_at",
+                   "library_paths", "clock", "povray_options")
 
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         for k in self.AUTO_FIELDS:
-            if d[k] is None:
+            if d[k] is None or d[k] == ():
                 del d[k]
         return _json_ready(d)
 
     @classmethod
     def from_dict(cls, d: dict) -> "Inputs":
-        size, at = d.get("film_size_mm"), d.get("focus_at")
+        size, at, clock = d.get("film_size_mm"), d.get("focus_at"), d.get("clock")
         return _fields_of(cls, d, film_size_mm=None if size is None else tuple(size),
-                          focus_at=None if at is None else (int(at[0]), int(at[1])))
+                          focus_at=None if at is None else (int(at[0]), int(at[1])),
+                          library_paths=tuple(str(p) for p in d.get("library_paths", ())),
+                          clock=None if clock is None else float(clock),
+                          povray_options=tuple(str(o) for o in d.get("povray_options", ())))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -335,7 +347,10 @@ class Plan:
     rays; ``batches`` the lens samples of each ``povlens render-batch``;
     ``sample_rows`` the film rows [start, end) of each sample when the sampling
     is adaptive (None: every sample renders the whole frame); ``depth_probe`` the
-    depth probes run for it (None: none)."""
+    depth probes run for it (None: none); ``notes`` what of the scene povlens replaces
+    or ignores (its camera's projection, focal blur, ``normal``, proportions; its fog
+    and media in the depth probe; options a render cannot use), one sentence each,
+    printed once by the command line (empty: nothing, and not written)."""
 
     inputs: Inputs
     lens: LensSummary
@@ -353,6 +368,12 @@ class Plan:
     adaptive: AdaptiveSampling | None = None
     decision: Decision | None = None
     depth_probe: DepthProbeRecord | None = None
+    notes: list[str] = dataclasses.field(default_factory=list)
+
+    def add_note(self, text: str | None) -> None:
+        """Add a note (:attr:`notes`) unless it is empty or already there."""
+        if text and text not in self.notes:
+            self.notes.append(text)
 
     def rows_of_sample(self, k: int) -> tuple[int, int]:
         """Film rows [start, end) lens sample ``k`` renders (all unless adaptive)."""
@@ -393,6 +414,8 @@ class Plan:
             d["decision"] = self.decision.to_dict()
         if self.depth_probe is not None:
             d["depth_probe"] = self.depth_probe.to_dict()
+        if self.notes:
+            d["notes"] = list(self.notes)
         return _json_ready(d)
 
     @classmethod
@@ -420,7 +443,8 @@ class Plan:
             sample_rows=None if rows is None else [(int(r[0]), int(r[1])) for r in rows],
             adaptive=None if adaptive is None else AdaptiveSampling.from_dict(adaptive),
             decision=None if decision is None else Decision.from_dict(decision),
-            depth_probe=None if probe is None else DepthProbeRecord.from_dict(probe))
+            depth_probe=None if probe is None else DepthProbeRecord.from_dict(probe),
+            notes=[str(n) for n in d.get("notes", [])])
 
 
 def plan_path(path: str | os.PathLike) -> Path:

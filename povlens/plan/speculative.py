@@ -28,7 +28,7 @@ import numpy as np
 from povlens.plan.decision import (FOCAL_BLUR_ADAPTIVE, MIN_SAMPLES, STRONG_VIGNETTING,
                                    VIGNETTING_TOLERANCE, samples_for_blur, shape_error_px)
 from povlens.plan.fixed import PlanStart, finish_plan
-from povlens.plan.options import ConvertOptions
+from povlens.plan.options import ConvertOptions, povray_options_of
 from povlens.plan.render_folder import focal_blur_text, write_folder
 from povlens.plan.schema import Decision, Plan
 from povlens.pov.process import RenderJob, start_render
@@ -132,7 +132,8 @@ def start_speculative_focal_blur(opts: ConvertOptions, plan0: Plan) -> Speculati
     final ``focal_blur.pov`` gets): the provisional mesh plan an "either" guess
     writes at the same time rewrites ``focal_blur.pov`` with its own sample
     count, possibly before POV-Ray has read it.  The image goes to
-    ``.speculative-focal-blur.exr`` in OUTDIR.
+    ``.speculative-focal-blur.exr`` in OUTDIR; POV-Ray gets the user's options, as the
+    final view would (:func:`povlens.rendering.samples.render_view`).
     """
     out = Path(opts.outdir)
     pov = out / ".speculative-focal-blur.pov"
@@ -142,6 +143,7 @@ def start_speculative_focal_blur(opts: ConvertOptions, plan0: Plan) -> Speculati
         job = start_render(pov, out / ".speculative-focal-blur.exr",
                            film.width_px, film.height_px, threads=os.cpu_count() or 1,
                            library_paths=[Path(plan0.inputs.scene).parent],
+                           povray_options=povray_options_of(plan0.inputs),
                            idle=SPECULATIVE_IDLE)
     except BaseException:
         pov.unlink(missing_ok=True)

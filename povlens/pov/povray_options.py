@@ -212,6 +212,28 @@ class PovrayOptions:
         clock = [] if self.clock is None else [f"+K{self.clock!r}"]
         return [*(f"+L{p}" for p in self.library_paths), *clock, *self.extra_options]
 
+    def antialiasing(self) -> bool | None:
+        """Whether the extra options turn POV-Ray's anti-aliasing on (``+A``,
+        ``Antialias=on``) or off (``-A``, ``Antialias=off``): the last one that sets it
+        decides, as on POV-Ray's command line; None when none sets it."""
+        state = None
+        for option in self.extra_options:
+            if option[0] in "+-":
+                if _switch_name(option[1:]) == "A":
+                    state = option[0] == "+"
+                continue
+            m = _INI.match(option)
+            if m is not None and m.group("name").lower() == "antialias":
+                value = option[m.end():].strip().lower()
+                if value in _INI_BOOLEANS:
+                    state = _INI_BOOLEANS[value]
+        return state
+
+
+#: POV-Ray's words for an INI option's true and false.
+_INI_BOOLEANS = {"on": True, "true": True, "yes": True, "1": True,
+                 "off": False, "false": False, "no": False, "0": False}
+
 
 def as_povray_options(value: "PovrayOptions | None | Iterable") -> PovrayOptions:
     """``value`` as :class:`PovrayOptions` (None: none)."""

@@ -132,7 +132,7 @@ def parse_camera_block(
     tok: Token,
     *,
     declared: bool,
-    symbol: Callable[[str], object],
+    symbol: Callable[[Token], object],
     version: float,
     previous: CameraState,
 ) -> CameraState | UnknownValue:
@@ -146,8 +146,8 @@ def parse_camera_block(
     expr : the expression evaluator reading ``stream``.
     tok : the ``camera`` token (its place names the camera).
     declared : True inside ``#declare NAME = camera { ... }``.
-    symbol : the value of a declared name (or None); a block may start with a declared
-        camera, and ``transform T`` names a declared transform.
+    symbol : the value of the declared name a token names (or None); a block may start
+        with a declared camera, and ``transform T`` names a declared transform.
     version : the scene's ``#version``; below 3.5 items apply as written.
     previous : for ``#version`` < 3.5, the last camera statement, which an undeclared
         block modifies.
@@ -175,7 +175,7 @@ def parse_camera_block(
 class _CameraBlock:
     """The items of one camera block, read into a :class:`CameraState`."""
 
-    def __init__(self, stream, expr: ExpressionParser, symbol: Callable[[str], object],
+    def __init__(self, stream, expr: ExpressionParser, symbol: Callable[[Token], object],
                  new_style: bool):
         self.stream, self.expr, self.symbol, self.new_style = stream, expr, symbol, new_style
         self.transforms = TransformReader(stream, expr, symbol)
@@ -188,7 +188,7 @@ class _CameraBlock:
         (a declared camera's name, new style)."""
         first = self.stream.peek()
         if first.kind == "ident" and first.text not in PROJECTIONS and first.text not in CAMERA_WORDS:
-            sym = self.symbol(first.text)
+            sym = self.symbol(first)
             if sym is not None:
                 if isinstance(sym, UnknownValue):
                     raise SdlEvalError(f"{first.where}: camera '{first.text}' is unknown: {sym.reason}",

@@ -56,7 +56,8 @@ class Declarations:
         uncertain = "" if ds.certain else ds.uncertain_reason()
         value = self.value(name)
         if uncertain:
-            value = UnknownValue(f"its {tok.text} at {name.where} is inside {uncertain}", maybe=True)
+            value = UnknownValue(f"its {tok.text} at {name.where} is inside {uncertain}", maybe=True,
+                                 hint=ds.uncertain_hint())
         if index is not None:
             self._set_element(name, index, value)
         else:
@@ -112,11 +113,11 @@ class Declarations:
             block = second.kind == "op" and second.text == "{"
             if word == "camera" and block:
                 ds.next()
-                return parse_camera_block(ds, ds.expr, first, declared=True, symbol=ds.symbols.get,
+                return parse_camera_block(ds, ds.expr, first, declared=True, symbol=ds.value_of,
                                           version=ds.version, previous=CameraState())
             if word == "transform" and (block or second.kind == "ident"):
                 ds.next()
-                return Transform(TransformReader(ds, ds.expr, ds.symbols.get).block(first))
+                return Transform(TransformReader(ds, ds.expr, ds.value_of).block(first))
             if word == "function":
                 ds.next()
                 self._skip_function()
@@ -130,7 +131,7 @@ class Declarations:
                 ds.next()
                 ds.skip_rest()
                 return UnknownValue(f"it is declared as '{word} {{...}}' at {name.where}", kind=word)
-            val = None if word in CONSTANTS or word in FUNCTIONS else ds.symbols.get(word)
+            val = None if word in CONSTANTS or word in FUNCTIONS else ds.value_of(first)
             if isinstance(val, _PASSED_AS_IS) and not (second.kind == "op" and second.text in ".[+-*/"):
                 ds.next()
                 return _copy(val)
@@ -218,7 +219,7 @@ class Declarations:
                 second = ds.peek(1)
                 if (second.kind == "op" and second.text == "{") or first.text == "function":
                     raise SdlEvalError(f"{first.where}: '{first.text} {{...}}' is not a number")
-                val = None if first.text in CONSTANTS else ds.symbols.get(first.text)
+                val = None if first.text in CONSTANTS else ds.value_of(first)
                 if isinstance(val, _PASSED_AS_IS) and second.kind == "op" and second.text in ",)}":
                     ds.next()
                     return _copy(val)

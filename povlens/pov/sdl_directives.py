@@ -184,10 +184,17 @@ class DirectiveStream:
             if isinstance(val, Macro):
                 self._with_own_buffer(self._invoke, tok, val)
                 return None
-        if not self.certain:
+            tok = tok._replace(bound=(val,))
+        if self.frames and not self.certain:
             self.tainted += 1
         self.buf.append(tok)
         return None
+
+    def value_of(self, tok: Token):
+        """What the identifier ``tok`` names (None: nothing), as when it was read."""
+        if tok.bound is not None:
+            return tok.bound[0]
+        return self.symbols.get(tok.text)
 
     def _with_own_buffer(self, fn, *args) -> None:
         """Run a directive handler on an empty buffer; what it peeked and left comes after
@@ -265,7 +272,7 @@ class DirectiveStream:
             return float(self.version)
         if name == "input_file_name":
             return self.root.name
-        val = self.symbols.get(name)
+        val = self.value_of(tok)
         if val is None:
             if self.unread_includes:
                 raise SdlEvalError(
@@ -285,9 +292,8 @@ class DirectiveStream:
         raise SdlEvalError(f"{tok.where}: '{name}' ({type(val).__name__}) used in an expression")
 
     def defined(self, name: str) -> bool | None:
-        """Whether ``name`` is declared (None: it depends on an uncertain branch)."""
-        if name in self.constants or name == "version":
-            return True
+        """Whether ``name`` is declared (None: it depends on an uncertain branch); POV-Ray's
+        keywords (``pi``, ``clock``...) are not declared names."""
         val = self.symbols.get(name)
         if val is None:
             return False

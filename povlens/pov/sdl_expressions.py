@@ -30,6 +30,9 @@ _ESCAPES = {"n": "\n", "t": "\t", "r": "\r", "a": "\a", "b": "\b", "f": "\f", "v
 
 _COLOUR_MODIFIERS = {"red": 0, "green": 1, "blue": 2, "filter": 3, "transmit": 4}
 
+#: Names that may be followed by an argument list.
+_CALLABLE = frozenset(FUNCTIONS) | UNKNOWABLE | {"defined", "dimensions", "dimension_size"}
+
 
 def decode_string(literal: str) -> str:
     """The text of a POV-Ray string literal (quotes included), escapes decoded."""
@@ -251,7 +254,9 @@ class ExpressionParser:
 
     def _name(self, tok: Token):
         name = tok.text
-        if self._is_op("("):
+        # (a declared name is looked up before the next token is looked at: that may
+        # end the macro body or include file the name is local to)
+        if name in _CALLABLE and self._is_op("("):
             if name in FUNCTIONS:
                 return self._call(tok)
             if name == "defined":
@@ -315,7 +320,8 @@ class ExpressionParser:
         return float(arr.dims[k - 1])
 
     def _colour(self, tok: Token) -> np.ndarray:
-        """A colour expression (5 components: red, green, blue, filter, transmit)."""
+        """A colour expression (5 components: red, green, blue, filter, transmit), rounded
+        to single precision as POV-Ray stores it."""
         word = tok.text
         if word in ("color", "colour"):
             nxt = self.s.peek()
@@ -337,7 +343,8 @@ class ExpressionParser:
         while True:
             nxt = self.s.peek()
             if nxt.kind != "ident" or nxt.text not in _COLOUR_MODIFIERS:
-                return col
+                # POV-Ray keeps colours in single precision (RGBFTColour of float)
+                return col.astype(np.float32).astype(np.float64)
             self.s.next()
             col[_COLOUR_MODIFIERS[nxt.text]] = as_float(self._add(False), nxt.text)
 

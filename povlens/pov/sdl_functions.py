@@ -164,7 +164,6 @@ UNKNOWABLE = {"min_extent", "max_extent", "trace", "inside", "rand", "seed", "vt
 #: Built-in names with a fixed value (floats or vectors).
 CONSTANTS = {
     "pi": math.pi,
-    "tau": 2.0 * math.pi,
     "true": 1.0,
     "yes": 1.0,
     "on": 1.0,

@@ -43,13 +43,20 @@ _DIRECTIVE_RE = re.compile(r'"|/\*|//|\#\s*[A-Za-z_][A-Za-z0-9_]*')
 
 class Token(NamedTuple):
     """One SDL token and where it starts (``path``, 1-based ``line``, character
-    ``offset`` in its file's text; -1 for made-up tokens)."""
+    ``offset`` in its file's text; -1 for made-up tokens).
+
+    ``bound`` is set by the directive layer on an identifier: ``(value,)``, what the
+    name meant when the token was read (None: not looked up).  POV-Ray looks names up
+    when it reads them, so a look-ahead past the end of a macro body still knows the
+    body's local names.
+    """
 
     kind: str  # "number", "string", "directive", "ident", "op", "eof" (and "stop", see sdl_directives)
     text: str
     path: str
     line: int
     offset: int = -1
+    bound: tuple | None = None
 
     @property
     def where(self) -> str:

@@ -104,7 +104,7 @@ class SceneReader:
         certain = ds.certain
         reason, hint = ds.uncertain_reason(), ds.uncertain_hint()
         tainted = ds.tainted
-        cam = parse_camera_block(ds, ds.expr, tok, declared=False, symbol=ds.symbols.get,
+        cam = parse_camera_block(ds, ds.expr, tok, declared=False, symbol=ds.value_of,
                                  version=ds.version, previous=self.previous_cam)
         self.camera_count += 1
         self.camera_frames = [f for f in ds.frames if f.kind in ("while", "for")]

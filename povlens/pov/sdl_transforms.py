@@ -22,11 +22,11 @@ TRANSFORM_WORDS = ("translate", "rotate", "scale", "matrix", "transform")
 
 
 class TransformReader:
-    """Reads transformations from ``stream``; ``symbol(name)`` gives a declared value
-    (or None)."""
+    """Reads transformations from ``stream``; ``symbol(token)`` gives the declared value
+    an identifier names (or None)."""
 
     def __init__(self, stream: TokenSource, expr: ExpressionParser,
-                 symbol: Callable[[str], object]):
+                 symbol: Callable[[Token], object]):
         self.stream, self.expr, self.symbol = stream, expr, symbol
 
     def item(self, word: str, t: Token) -> np.ndarray | None:
@@ -68,7 +68,7 @@ class TransformReader:
 
     def declared(self, ident: Token) -> np.ndarray:
         """The matrix of the declared transform named by ``ident``."""
-        val = self.symbol(ident.text)
+        val = self.symbol(ident)
         if isinstance(val, Transform):
             return val.m.copy()
         if isinstance(val, UnknownValue):

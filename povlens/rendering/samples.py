@@ -13,6 +13,11 @@ so an interrupted run never leaves a half-written file at a final name):
 * a view (``pinhole`` / ``focal-blur``) -> ``view-<name>.exr``.
 * composite -> ``image.exr`` (linear float) and ``image.png`` (sRGB preview).
 
+Every POV-Ray run gets the user's POV-Ray options the plan records (library paths,
+clock, passthrough options: :func:`povlens.plan.options.povray_options_of`), so
+``make`` and ``povlens render-batch`` render as ``povlens render`` does; lens samples
+run without anti-aliasing whatever the options say (:data:`MESH_SWITCHES`).
+
 Re-running skips every unit whose outputs exist: that is how an interrupted
 render resumes.
 
@@ -45,6 +50,7 @@ from tqdm import tqdm
 
 from povlens.errors import ParameterError, PovlensError, PovrayError
 from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.options import povray_options_of
 from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pupil.sampling import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
@@ -63,7 +69,7 @@ from povlens.lens.prescription import read_lens
 __all__ = ["convert_and_render", "render_samples", "render_batch", "sample_rows",
            "samples_per_pixel", "render_view", "composite_outdir", "render_outdir",
            "pupil_table_for", "lens_for", "exposure_for", "film_row_args", "EarlyRender",
-           "POVRAY_IN_FLIGHT"]
+           "POVRAY_IN_FLIGHT", "MESH_SWITCHES"]
 
 
 def lens_for(plan: Plan):
@@ -190,6 +196,11 @@ def film_row_args(povray: PovraySettings, rows: tuple[int, int]) -> list[str]:
     return pixel_range_args(r0 + drop, r1 + drop, povray.render_height, "row")
 
 
+#: POV-Ray switches of a lens sample's render after the user's options: no
+#: anti-aliasing, which would take rays between pixels from the neighbouring pixels'
+#: mesh faces (the plan's notes say so when the user's options turn it on).
+MESH_SWITCHES = ("-A",)
+
 #: POV-Ray processes in flight per core (``render_outdir``) or per batch (``povlens
 #: render-batch``): each run idles ~0.6 s in start-up, so several overlap on a core
 #: (measurements: docs/decisions/planning.md, "POV-Ray processes in flight").
@@ -211,6 +222,7 @@ class _SampleRenders:
         self.limit = max(1, int(limit))
         self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
         self.povray_s = 0.0
+        self.povray_options = povray_options_of(plan.inputs)   # the user's, checked once
 
     def start(self, k: int) -> None:
         while len(self.running) >= self.limit:
@@ -222,7 +234,8 @@ class _SampleRenders:
         switches = render_switches(
             "f.exr", pv.render_width, pv.render_height, threads=1,
             library_paths=[Path(self.plan.inputs.scene).parent],
-            extra_args=[f"Declare=PovlensFrame={k}",
+            povray_options=self.povray_options,
+            extra_args=[*MESH_SWITCHES, f"Declare=PovlensFrame={k}",
                         *film_row_args(pv, self.plan.rows_of_sample(k))])
         cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
         with open(tmp / "stderr.txt", "w") as err:
@@ -374,7 +387,8 @@ def render_view(outdir: str | os.PathLike, view: str) -> Path:
     if not out.exists():
         povray_render(outdir / name, out, film.width_px, film.height_px,
                       threads=os.cpu_count() or 1,
-                      library_paths=[Path(plan.inputs.scene).parent])
+                      library_paths=[Path(plan.inputs.scene).parent],
+                      povray_options=povray_options_of(plan.inputs))
     if plan.inputs.method == view.replace("_", "-"):
         _finish_image(outdir, read_image(out)[..., :3])
     return out

@@ -73,6 +73,80 @@ RENDER_CASES = {
 }
 
 
+# Scene constructs as people write them (issue 13): each must give POV-Ray's own image.
+# (name -> scene text, keyword arguments of parse_scene_camera, POV-Ray switches)
+CONSTRUCT_CASES = {
+    "switch_fallthrough_break": ("""
+        #declare Shot = 2;
+        #switch (Shot)
+          #case (1) camera { location <5, 5, 5> look_at 0 } #break
+          #range (2, 3) #declare L = <0.4, 1.3, -3.5>;
+          #case (9) camera { location L look_at <0, 0.6, 2> angle 50 }
+          #if (1) #break #end
+          camera { location 9 }
+          #else camera { location 8 }
+        #end""", {}, ()),
+    "if_inside_camera": ("""
+        #declare Wide = yes;
+        camera { location <0.3, 1.2, -3> #if (Wide) angle 75 #else angle 20 #end
+                 #declare Tilt = 8; rotate x*Tilt look_at <0, 0.7, 2> }""", {}, ()),
+    "while_and_for": ("""
+        #declare I = 0; #declare P = <0, 0.2, -1>;
+        #while (I < 4) #declare P = P + <0.1, 0.25, -0.5>; #declare I = I + 1; #end
+        #declare S = 0; #for (K, 1, 5, 2) #declare S = S + K; #end
+        camera { location P look_at <0, S/9, 3> }""", {}, ()),
+    "macro_makes_camera": ("""
+        #macro Cam(L, A)
+          #local T = L + <0, -0.5, 4>;
+          camera { location L look_at T angle A right x*image_width/image_height }
+        #end
+        Cam(<-0.5, 1.4, -3.2>, 45)""", {}, ()),
+    "macro_returns_vector": ("""
+        #macro Orbit(R, Deg) <R*sin(radians(Deg)), 1.1, -R*cos(radians(Deg))> #end
+        camera { location Orbit(4, 20) look_at <0, 0.5, 1.5> }""", {}, ()),
+    "declared_transforms": ("""
+        #declare Spin = transform { rotate y*-12 translate <0.2, 0, 0> }
+        #declare Lift = transform { translate <0, 0.3, 0> rotate x*5 }
+        camera { location <0, 1, -3> look_at <0, 0.6, 2>
+                 transform Spin transform { Lift } transform { Spin inverse } }""", {}, ()),
+    "vector_forms": ("""
+        #declare A = <0.5 -1 1.2>;
+        #declare B = <1, 2> + z;
+        #declare C = color red 0.3 green 0.6;
+        camera { location <A.x, B.y*0.6 + C.green/6, -4 + B.z> up y right 4/3*x
+                 look_at vaxis_rotate(<0, 0.5, 3>, y, -10) + vrotate(x*0.1, <0, 0, 90>)
+                 sky vnormalize(<0.1, 1, 0>) }""", {}, ()),
+    "clock": ("camera { location <clock, 1.2, -3.5 + clock> look_at <0, 0.6, 2> }",
+              {"clock": 0.7}, ("+K0.7",)),
+    "declares": ("camera { location <0, CamH, -3.5> look_at <0, 0.6, 2> }",
+                 {"declares": {"CamH": 1.9}}, ("declare=CamH=1.9",)),
+    "no_camera": ("", {}, ()),
+}
+
+
+def _render_pair(tmp_path, name, text, w, h, kwargs, switches):
+    """Max |own image - image through the parsed camera| for one scene."""
+    scene = _scene(tmp_path, name, BODY + text)
+    cam = parse_scene_camera(scene, w, h, **kwargs)
+    wrapper = write_text(
+        tmp_path / f"{name}_pin.pov",
+        pinhole_wrapper(scene.name, cam.location, cam.direction_vector, cam.right_vector,
+                        cam.up_vector),
+    )  # fmt: skip
+    own = povray.render(scene, tmp_path / f"{name}_own.exr", w, h, extra_args=switches)
+    pin = povray.render(wrapper, tmp_path / f"{name}_pin.exr", w, h, extra_args=switches)
+    return name, float(np.abs(read_image(own) - read_image(pin)).max())
+
+
+@pytest.mark.skipif(not HAVE_POVRAY, reason="POV-Ray is not installed")
+def test_scene_constructs_reproduce_povray(tmp_path):
+    w, h = 48, 36
+    with ThreadPoolExecutor(2) as pool:
+        results = dict(pool.map(lambda kv: _render_pair(tmp_path, kv[0], kv[1][0], w, h, kv[1][1],
+                                                        kv[1][2]), CONSTRUCT_CASES.items()))
+    assert results == {name: 0.0 for name in CONSTRUCT_CASES}
+
+
 @pytest.mark.skipif(not HAVE_POVRAY, reason="POV-Ray is not installed")
 def test_parsed_camera_reproduces_povray(tmp_path):
     w, h = 48, 36
@@ -162,22 +236,31 @@ def test_camera_in_local_include(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "name, text, fragment",
+    "name, text, fragment, hint",
     [
-        ("none", '#include "colors.inc"\nsphere { 0, 1 }', "no camera statement"),
-        ("macro", "#macro MyCam(L) camera { location L look_at 0 } #end\nMyCam(<0,1,-3>)", "macro"),
-        ("unknown_if", "#if (Foo > 1) camera { location 1 } #else camera { location 2 } #end", "#if"),
-        ("function", "camera { location <0,1,-3> look_at <0, f_noise3d(1,2,3), 0> }", "f_noise3d"),
-        ("undefined", "camera { location CamPos look_at 0 }", "CamPos"),
-        ("bad_declare", "#declare P = MyMacro(3);\ncamera { location P look_at 0 }", "'P'"),
-        ("loop", "#declare I=0; #while (I<3) #declare I=I+1; #end\ncamera { location <I,1,-3> }", "#while"),
-        ("transform_id", "#declare T = transform { rotate y*30 }\ncamera { location 1 transform T }", "'T'"),
-        ("mesh_camera", "camera { mesh_camera { 1 0 mesh { M } } }", "mesh_camera"),
-        ("directive", "camera { location <0,1,-3> #if (1) look_at 0 #end }", "#if"),
-        ("image_width", "camera { location 1 right x*image_width/image_height }", "image_width"),
+        ("missing_include", '#include "povlens_nowhere.inc"\nsphere { 0, 1 }', "povlens_nowhere.inc",
+         "library_paths"),
+        ("macro", "#macro MyCam(L) camera { location L look_at 0 } #end\nMyCam(<0,1,-3>*Foo)",
+         "'Foo' is not defined", "declares"),
+        ("unknown_if", "#if (Foo > 1) camera { location 1 } #else camera { location 2 } #end", "#if",
+         "declares={'Foo'"),
+        ("function", "camera { location <0,1,-3> look_at <0, f_noise3d(1,2,3), 0> }", "f_noise3d", ""),
+        ("undefined", "camera { location CamPos look_at 0 }", "CamPos", "declares={'CamPos'"),
+        ("bad_declare", "#declare P = MyMacro(3);\ncamera { location P look_at 0 }", "'P'", ""),
+        ("loop", "#declare I=0; #while (I<rand(seed(1))) #declare I=I+1; #end\ncamera { location <I,1,-3> }",
+         "#while", ""),
+        ("transform_id", "#declare T = transform { rotate y*Spin }\ncamera { location 1 transform T }",
+         "'T'", "declares={'Spin'"),
+        ("mesh_camera", "camera { mesh_camera { 1 0 mesh { M } } }", "mesh_camera", ""),
+        ("directive", "camera { location <0,1,-3> #if (Wide) look_at 0 #end }", "#if", "declares={'Wide'"),
+        ("image_width", "camera { location 1 right x*image_width/image_height }", "image_width",
+         "image_width and image_height"),
+        ("error", '#if (clock = 0) #error "render with +KFF" #end camera { }', "+KFF", ""),
     ],
 )
-def test_unreadable_cameras_give_clear_errors(tmp_path, name, text, fragment):
+def test_unreadable_cameras_give_clear_errors(tmp_path, name, text, fragment, hint):
+    """The message names the construct and its place; the hint says what to pass (API
+    parameter names, not command-line flags) and how to give the camera explicitly."""
     scene = _scene(tmp_path, name, text)
     with pytest.raises(SceneCameraError) as info:
         parse_scene_camera(scene)
@@ -186,6 +269,8 @@ def test_unreadable_cameras_give_clear_errors(tmp_path, name, text, fragment):
     assert fragment in str(err)
     assert f"{name}.pov" in str(err)
     assert "'location'" in err.hint and "'look_at'" in err.hint and "'sky'" in err.hint
+    assert hint in err.hint
+    assert "--" not in err.hint  # API parameters, not command-line flags
 
 
 def test_missing_scene_file(tmp_path):

@@ -1,0 +1,112 @@
+"""Paraxial data computed from the *source* of an imported lens, without povlens.
+
+A small y-nu trace (Smith, *Modern Optical Engineering*, ch. 3) and readers of the
+source formats written for the tests: the importers' results are checked against
+these, so the two must agree on the optics, not share code.
+
+A system is a list of surfaces ``(c, t, n_after)``: curvature (1/mm), thickness to the
+next surface (mm), index after; plus the index of the stop surface and the stop
+diameter.  The stop's height is its vertex plane's.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+
+
+def trace(surfaces, y, nu):
+    """Heights at every surface and the final (y, nu) of the ray (y, nu) entering surface 0."""
+    n, heights = 1.0, []
+    for i, (c, t, n_after) in enumerate(surfaces):
+        heights.append(y)
+        nu = nu - y * (n_after - n) * c
+        n = n_after
+        if i < len(surfaces) - 1:
+            y = y + t * nu / n
+    return heights, y, nu
+
+
+def reference(surfaces, stop, stop_diameter):
+    """EFL, f-number, entrance pupil (from the first vertex) and exit pupil (from the last
+    vertex) positions, positive toward the film."""
+    h_marginal, _, nu_k = trace(surfaces, 1.0, 0.0)
+    efl = -1.0 / nu_k
+    h_angle, _, _ = trace(surfaces, 0.0, 1.0)
+    a, b = h_marginal[stop], h_angle[stop]
+    entrance = b / a                      # the chief ray (y = -u z, u) has height 0 at the stop
+    _, y_k, nu_c = trace(surfaces, -entrance, 1.0)
+    exit_ = -y_k / nu_c                   # where the chief ray crosses the axis after the lens
+    return {"efl": efl, "f_number": efl / (stop_diameter / abs(a)),
+            "entrance_pupil_position": entrance, "exit_pupil_position": exit_}
+
+
+def lentil_system(path, lens_id, table="optical-elements-patent"):
+    """A lentil entry: |radius| >= 9999 flat, the iris the stop, air where ior is null."""
+    rows = json.load(open(path))[lens_id][table]
+    surfaces, stop, stop_d = [], None, None
+    for k, r in enumerate(rows):
+        flat = abs(r["radius"]) >= 9999
+        if r["material"] == "iris":
+            stop, stop_d = k, 2 * r["housing-radius"]
+            n = surfaces[-1][2] if surfaces else 1.0
+        else:
+            n = 1.0 if r["ior"] in (None, 1) or r["material"] == "air" else r["ior"]
+        surfaces.append((0.0 if flat else 1.0 / r["radius"], r["thickness"], n))
+    return surfaces, stop, stop_d
+
+
+def zmx_blocks(text):
+    """The SURF blocks of a .zmx text: dicts of the keys the tests need."""
+    units = {"MM": 1.0, "IN": 25.4, "CM": 10.0}
+    unit = units[re.search(r"^UNIT (\w+)", text, re.M).group(1)]
+    blocks = []
+    for chunk in re.split(r"^SURF \d+\s*$", text, flags=re.M)[1:]:
+        get = lambda key: re.search(rf"^\s+{key} (.*)$", chunk, re.M)  # noqa: E731
+        glas = get("GLAS")
+        disz = get("DISZ")
+        blocks.append({
+            "c": float(get("CURV").group(1).split()[0]) / unit,
+            "t": (0.0 if disz is None or disz.group(1).startswith("INFINITY")
+                  else float(disz.group(1).split()[0]) * unit),
+            "glass": glas.group(1).split() if glas else None,
+            "stop": re.search(r"^\s+STOP\s*$", chunk, re.M) is not None,
+            "semi": float(get("DIAM").group(1).split()[0]) * unit})
+    return blocks
+
+
+def zmx_system(path, glasses=None):
+    """A .zmx lens (object and image dropped, leading flat surfaces in air dropped): the
+    stop at its surface's vertex."""
+    raw = open(path, "rb").read()
+    text = raw.decode("utf-16") if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else raw.decode()
+    blocks = zmx_blocks(text)[1:-1]
+    surfaces, stop, stop_d, n = [], None, None, 1.0
+    for b in blocks:
+        if b["glass"] is None:
+            n_after = 1.0
+        elif glasses and b["glass"][0] in glasses:
+            n_after = glasses[b["glass"][0]]
+        else:
+            n_after = float(b["glass"][3])
+        dummy = b["c"] == 0 and n == 1.0 and n_after == 1.0 and not b["stop"]
+        if dummy and not surfaces:
+            n = n_after
+            continue                          # the front vertex is the first real surface
+        if b["stop"]:
+            stop, stop_d = len(surfaces), 2 * b["semi"]
+        surfaces.append((b["c"], b["t"], n_after))
+        n = n_after
+    return surfaces, stop, stop_d
+
+
+def with_stop_plane(surfaces, stop, shift):
+    """The system with a flat stop ``shift`` mm behind the vertex of surface ``stop`` (the
+    stop plane in the rim plane of a face concave toward the air behind it)."""
+    c, t, n = surfaces[stop]
+    return (surfaces[:stop] + [(c, shift, n), (0.0, t - shift, n)] + surfaces[stop + 1:],
+            stop + 1)
+
+
+def rim_sag(radius, semi):
+    return radius - math.copysign(math.sqrt(radius * radius - semi * semi), radius)
