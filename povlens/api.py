@@ -112,7 +112,12 @@ def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | 
         How the lens is rendered; ``auto`` measures the scene and chooses.
     **options
         Any field of :class:`povlens.plan.options.ConvertOptions` (``samples``,
-        ``width``, ``height``, ``f_number``, ``units``, ``tolerance_px``, ...).
+        ``width``, ``height``, ``f_number``, ``units``, ``tolerance_px``, ...), among
+        them POV-Ray's own options for every POV-Ray run of the scene:
+        ``library_paths`` (folders, POV-Ray's ``+L``), ``clock`` (``+K``) and
+        ``povray_options`` (switches or INI options, e.g. ``("+A0.3",)``).
+
+    The plan's ``notes`` say what of the scene povlens replaces or ignores.
 
     Returns
     -------

@@ -23,7 +23,7 @@ from povlens.plan import speculative
 from povlens.plan.adaptive import adaptive_rows, apply_to_plan, limit_samples, real_blur_model_error
 from povlens.plan.auto import choose_method, measure_depth_map, start_depth_probe
 from povlens.plan.autofocus import resolve_focus
-from povlens.plan.depth_probe import depth_limits, probe_record
+from povlens.plan.depth_probe import atmosphere_note, depth_limits, probe_record
 from povlens.plan.fixed import (PlanStart, finish_plan, make_plan, make_plan_with_lens,
                                 run_in_background, start_plan)
 from povlens.plan.options import METHODS, ConvertOptions, with_povray_options_checked
@@ -204,9 +204,9 @@ def convert(opts: ConvertOptions, render_early=None) -> Plan:
         if choice is not None:
             range_info = choice.decision.numbers.get("depth_probe")
         if focus_info is not None or range_info is not None:
-            plan.depth_probe = probe_record(opts.scene, range_info, focus_info,
-                                            library_paths=opts.library_paths)
-            plan.add_note(plan.depth_probe.scene_atmosphere)   # the probe's blind spot
+            plan.depth_probe = probe_record(range_info, focus_info)
+            # the probe's blind spot: the scene's own fog and media
+            plan.add_note(atmosphere_note(opts.scene, opts.library_paths))
         if choice is not None:
             req = choice.requested
             plan.record_auto_choice(choice.decision, req.tolerance_px, req.auto_samples)

@@ -95,7 +95,7 @@ from povlens.util.files import write_text
 
 __all__ = ["ProbeView", "probe_depth", "start_probe", "DepthProbe", "probe_wrapper",
            "ray_directions", "axial_depth", "distance_from_fade", "depth_limits",
-           "probe_record", "scene_atmosphere", "FADE_POWER", "LIGHT_COLOUR",
+           "probe_record", "scene_atmosphere", "atmosphere_note", "FADE_POWER", "LIGHT_COLOUR",
            "PROBE_SWITCHES", "RATIO_TOLERANCE", "BACKGROUND_ALPHA", "NEAR_PERCENTILE",
            "FAR_PERCENTILE", "BACKGROUND_FRACTION", "METHOD", "TREATMENT"]
 
@@ -310,19 +310,23 @@ def scene_atmosphere(scene: str | os.PathLike, _seen: set | None = None,
     return sorted(found)
 
 
-def probe_record(scene: str | os.PathLike, depth_range: dict | None = None,
-                 focus: dict | None = None, library_paths=()) -> DepthProbeRecord:
-    """The plan.json record of the probes run for a plan of ``scene``: the method, how
-    pixels without depth count, the note on the scene's own fog / media (only if its
-    text, or a file it includes from its folder or ``library_paths``, has them) and the
-    probes' numbers (``depth_range``, ``focus``)."""
+def atmosphere_note(scene: str | os.PathLike, library_paths=()) -> str | None:
+    """The plan's note that the depth probe does not see the scene's own fog / media
+    (only if its text, or a file it includes from its folder or ``library_paths``, has
+    them; :func:`scene_atmosphere`), else None."""
     found = scene_atmosphere(scene, library_paths=library_paths)
-    note = None
-    if found:
-        note = (f"the scene has {' and '.join(found)}: the depth probe does not see "
-                f"{'it' if len(found) == 1 else 'them'} (POV-Ray computes no fog or "
-                f"media at +Q6); its distances are to surfaces")
-    return DepthProbeRecord(METHOD, TREATMENT, note, depth_range, focus)
+    if not found:
+        return None
+    return (f"the scene has {' and '.join(found)}: the depth probe does not see "
+            f"{'it' if len(found) == 1 else 'them'} (POV-Ray computes no fog or "
+            f"media at +Q6); its distances are to surfaces")
+
+
+def probe_record(depth_range: dict | None = None, focus: dict | None = None
+                 ) -> DepthProbeRecord:
+    """The plan.json record of the probes run for a plan: the method, how pixels
+    without depth count and the probes' numbers (``depth_range``, ``focus``)."""
+    return DepthProbeRecord(METHOD, TREATMENT, depth_range, focus)
 
 
 def probe_depth(outdir: str | os.PathLike, fade_distance: float | None = None,

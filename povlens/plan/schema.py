@@ -316,15 +316,15 @@ class AdaptiveSampling:
 class DepthProbeRecord:
     """The depth probes run for a plan (:mod:`povlens.plan.depth_probe`): ``method``
     (one line), ``treatment`` (how background and pixels without a depth of their own
-    count), ``scene_atmosphere`` (a note, only when the scene has fog or media: the
-    probe does not see them), and the numbers of the probes: ``depth_range`` (the
-    depth range of --method auto or --adaptive: pixels, background and no-depth
-    counts, near / far) and ``focus`` (:mod:`povlens.plan.autofocus`: where the focus
-    was measured and what the probe saw there).  Distances in mm unless named."""
+    count), and the numbers of the probes: ``depth_range`` (the depth range of
+    --method auto or --adaptive: pixels, background and no-depth counts, near / far)
+    and ``focus`` (:mod:`povlens.plan.autofocus`: where the focus was measured and
+    what the probe saw there).  Distances in mm unless named.  That the probe does
+    not see the scene's fog or media is one of the plan's ``notes`` (earlier plans
+    kept it here as ``scene_atmosphere``: :meth:`Plan.from_dict` moves it)."""
 
     method: str
     treatment: str
-    scene_atmosphere: str | None = None
     depth_range: dict | None = None
     focus: dict | None = None
 
@@ -425,6 +425,10 @@ class Plan:
         f, tl = d["film"], d["thin_lens"]
         rows, adaptive, decision = d.get("sample_rows"), d.get("adaptive"), d.get("decision")
         probe = d.get("depth_probe")
+        notes = [str(n) for n in d.get("notes", [])]
+        old_note = None if probe is None else probe.get("scene_atmosphere")
+        if old_note and old_note not in notes:      # where plans before notes kept it
+            notes.append(str(old_note))
         return cls(
             inputs=Inputs.from_dict(d["inputs"]),
             lens=_fields_of(LensSummary, d["lens"]),
@@ -444,7 +448,7 @@ class Plan:
             adaptive=None if adaptive is None else AdaptiveSampling.from_dict(adaptive),
             decision=None if decision is None else Decision.from_dict(decision),
             depth_probe=None if probe is None else DepthProbeRecord.from_dict(probe),
-            notes=[str(n) for n in d.get("notes", [])])
+            notes=notes)
 
 
 def plan_path(path: str | os.PathLike) -> Path:

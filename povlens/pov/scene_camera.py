@@ -215,7 +215,7 @@ def _read_camera(path: Path, image_width, image_height, libs, clock, declares
     if isinstance(cam, UnknownValue):
         if cam.kind == "mesh_camera":
             raise SceneCameraError(f"cannot use the camera of {path}: {cam.reason}",
-                                   with_explicit_hint("render it with a perspective camera"))
+                                   with_explicit_hint(None))
         raise SceneCameraError(f"cannot read the camera of {path}: {cam.reason}",
                                with_explicit_hint(cam.hint))
     assert isinstance(cam, CameraState)
@@ -227,7 +227,7 @@ def _moves_with_clock(path, image_width, image_height, libs, declares, cam) -> s
     try:
         other, _ = _read_camera(path, image_width, image_height, libs, PROBE_CLOCK, declares)
     except SceneCameraError:
-        other = None
+        return ""  # (nothing to compare with)
     if other is None and cam is None:
         return ""
     same = (other is not None and cam is not None

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -76,6 +76,17 @@ class CameraState:
                 raise SdlEvalError(f"{self.where}: camera direction has zero length")
             dir_len = np.linalg.norm(self.right) / math.tan(math.radians(angle) / 2.0) / 2.0
             self.direction = self.direction / d * dir_len
+
+    def fit_orthographic(self) -> None:
+        """Scale ``right`` and ``up`` of an orthographic camera so that it frames what a
+        perspective camera would at the look_at distance (POV-Ray's "apply orthographic":
+        by |look_at - location| / |direction|, look_at defaulting to <0, 0, 1>)."""
+        target = np.array([0.0, 0.0, 1.0]) if self.look_at is None else self.look_at
+        k1 = float(np.linalg.norm(target - self.location))
+        k2 = float(np.linalg.norm(self.direction))
+        if k1 > 1e-10 and k2 > 1e-10:
+            self.right = self.right * (k1 / k2)
+            self.up = self.up * (k1 / k2)
 
     def apply_look_at(self, look_at: np.ndarray) -> None:
         """Turn the camera to ``look_at`` (3,) about ``sky``, keeping the lengths of
@@ -238,6 +249,8 @@ class _CameraBlock:
         word = t.text
         if word in PROJECTIONS:
             cam.type = word
+            if word == "orthographic" and not self.new_style:
+                cam.fit_orthographic()
         elif word == "cylinder":
             n = int(as_float(self._eval(), "cylinder type"))
             cam.type = f"cylinder {n}"
@@ -263,7 +276,7 @@ class _CameraBlock:
             a = as_float(self._eval(), "angle")
             if a < 0:
                 raise SdlEvalError(f"{t.where}: negative camera angle")
-            if cam.type == "spherical" and self.stream.peek().text == ",":
+            if cam.type == "spherical" and self.stream.peek(0, expand=False).text == ",":
                 self.stream.next()
                 self._eval()
             if self.new_style:
@@ -274,7 +287,7 @@ class _CameraBlock:
             cam.aperture = as_float(self._eval(), "aperture")
         elif word == "blur_samples":
             self._eval()
-            if self.stream.peek().text == ",":
+            if self.stream.peek(0, expand=False).text == ",":
                 self.stream.next()
                 self._eval()
         elif word in ("confidence", "variance"):
@@ -304,6 +317,9 @@ def _apply_in_povray_order(cam: CameraState, pending: Mapping[str, object]) -> N
             setattr(cam, key, pending[key])
     if "look_at" in pending:
         cam.apply_look_at(pending["look_at"])
+    if cam.type == "orthographic" and (("up" not in pending and "right" not in pending)
+                                       or "angle" in pending):
+        cam.fit_orthographic()
     if "focal_point" in pending:
         cam.focal_point = pending["focal_point"]
         cam.focal_distance = float(np.linalg.norm(cam.focal_point - cam.location))

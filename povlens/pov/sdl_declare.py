@@ -44,13 +44,16 @@ class Declarations:
             self.skip_statement_raw()
             return
         index = None
+        mark = ds.mark()
         try:
-            if ds.peek().text == "[":
+            if ds.peek(0, expand=False).text == "[":
                 index = self._indices()
             eq = ds.next()
             if eq.text != "=":
                 raise SdlEvalError(f"{eq.where}: expected '=' after {tok.text} {name.text}")
         except SdlEvalError:
+            if mark is not None:
+                ds.reset(mark)
             self.skip_statement_raw()
             return
         uncertain = "" if ds.certain else ds.uncertain_reason()
@@ -66,7 +69,7 @@ class Declarations:
     def _indices(self) -> list[float]:
         ds = self.ds
         idx = []
-        while ds.peek().text == "[":
+        while ds.peek(0, expand=False).text == "[":
             ds.next()
             idx.append(as_float(ds.expr.parse(), "array index"))
             ds.expr.expect("]")
@@ -109,7 +112,7 @@ class Declarations:
         first = ds.peek()
         if first.kind == "ident":
             word = first.text
-            second = ds.peek(1)
+            second = ds.peek(1, expand=False)
             block = second.kind == "op" and second.text == "{"
             if word == "camera" and block:
                 ds.next()
@@ -159,11 +162,11 @@ class Declarations:
         ds.declare_depth += 1
         try:
             dims = []
-            while ds.peek().text == "[":
+            while ds.peek(0, expand=False).text == "[":
                 ds.next()
                 dims.append(int(as_float(ds.expr.parse(), "array size")))
                 ds.expr.expect("]")
-            has_init = ds.peek().text == "{"
+            has_init = ds.peek(0, expand=False).text == "{"
         finally:
             ds.declare_depth -= 1
         if not dims or any(n <= 0 for n in dims) or math.prod(dims) > 10**6:
@@ -185,7 +188,7 @@ class Declarations:
                 self._array_init(arr, level + 1, base + i * stride)
             else:
                 arr.items[base + i] = self.argument_value()
-            if ds.peek().text == ",":
+            if ds.peek(0, expand=False).text == ",":
                 ds.next()
         ds.expr.expect("}")
 
@@ -194,7 +197,7 @@ class Declarations:
         """The arguments of a macro call (after its '('): values, UnknownValues for what
         cannot be evaluated, None for an argument left out."""
         ds = self.ds
-        if ds.peek().text == ")":
+        if ds.peek(0, expand=False).text == ")":
             ds.next()
             return []
         args = []
@@ -216,7 +219,7 @@ class Declarations:
         mark = ds.mark()
         try:
             if first.kind == "ident":
-                second = ds.peek(1)
+                second = ds.peek(1, expand=False)
                 if (second.kind == "op" and second.text == "{") or first.text == "function":
                     raise SdlEvalError(f"{first.where}: '{first.text} {{...}}' is not a number")
                 val = None if first.text in CONSTANTS else ds.value_of(first)
@@ -278,7 +281,7 @@ class Declarations:
                 return
             if tok.text in "({[":
                 depth += 1
-            elif tok.text in ")}]":
+            elif tok.text in ")]" and depth > 0 or tok.text == "}":
                 depth -= 1
 
     def undef(self, tok: Token) -> None:

@@ -57,9 +57,10 @@ def decode_string(literal: str) -> str:
 
 
 class TokenSource(Protocol):
-    """Where an :class:`ExpressionParser` reads its tokens."""
+    """Where an :class:`ExpressionParser` reads its tokens (``expand=False``: a
+    look-ahead after a complete value, which must not run a macro call)."""
 
-    def peek(self, ahead: int = 0) -> Token: ...
+    def peek(self, ahead: int = 0, expand: bool = True) -> Token: ...
 
     def next(self) -> Token: ...
 
@@ -84,8 +85,13 @@ class ExpressionParser:
         return SdlEvalError(f"{tok.where}: {msg}")
 
     def _is_op(self, text: str, ahead: int = 0) -> bool:
-        tok = self.s.peek(ahead)
+        tok = self.s.peek(ahead, expand=False)
         return tok.kind == "op" and tok.text == text
+
+    def _after(self, v) -> Token | None:
+        """The token after the value ``v`` (a look-ahead), or None after a string, which
+        POV-Ray reads without looking further."""
+        return None if isinstance(v, str) else self.s.peek(0, expand=False)
 
     def expect(self, text: str) -> Token:
         """Consume the operator ``text`` or raise :class:`SdlEvalError`."""
@@ -102,7 +108,7 @@ class ExpressionParser:
         ``no_gt`` stops at a ``>`` (the end of a vector literal ``<a, b, c>``).
         """
         cond = self._or(no_gt)
-        if self._is_op("?"):
+        if not isinstance(cond, str) and self._is_op("?"):
             self.s.next()
             a = self.parse(no_gt)
             self.expect(":")
@@ -117,7 +123,7 @@ class ExpressionParser:
 
     def _or(self, no_gt):
         v = self._and(no_gt)
-        while self._is_op("|"):
+        while not isinstance(v, str) and self._is_op("|"):
             self.s.next()
             w = self._and(no_gt)
             v = 1.0 if (as_float(v, "operand of '|'") != 0 or as_float(w, "operand of '|'") != 0) else 0.0
@@ -125,7 +131,7 @@ class ExpressionParser:
 
     def _and(self, no_gt):
         v = self._cmp(no_gt)
-        while self._is_op("&"):
+        while not isinstance(v, str) and self._is_op("&"):
             self.s.next()
             w = self._cmp(no_gt)
             v = 1.0 if (as_float(v, "operand of '&'") != 0 and as_float(w, "operand of '&'") != 0) else 0.0
@@ -143,8 +149,8 @@ class ExpressionParser:
     def _cmp(self, no_gt):
         v = self._add(no_gt)
         while True:
-            tok = self.s.peek()
-            if tok.kind != "op" or tok.text not in self._CMP or (no_gt and tok.text == ">"):
+            tok = self._after(v)
+            if tok is None or tok.kind != "op" or tok.text not in self._CMP or (no_gt and tok.text == ">"):
                 return v
             self.s.next()
             w = self._add(no_gt)
@@ -153,8 +159,8 @@ class ExpressionParser:
     def _add(self, no_gt):
         v = self._mul(no_gt)
         while True:
-            tok = self.s.peek()
-            if tok.kind != "op" or tok.text not in ("+", "-"):
+            tok = self._after(v)
+            if tok is None or tok.kind != "op" or tok.text not in ("+", "-"):
                 return v
             self.s.next()
             v = self._binop(v, self._mul(no_gt), tok)
@@ -162,8 +168,8 @@ class ExpressionParser:
     def _mul(self, no_gt):
         v = self._unary(no_gt)
         while True:
-            tok = self.s.peek()
-            if tok.kind != "op" or tok.text not in ("*", "/"):
+            tok = self._after(v)
+            if tok is None or tok.kind != "op" or tok.text not in ("*", "/"):
                 return v
             self.s.next()
             v = self._binop(v, self._unary(no_gt), tok)
@@ -191,8 +197,8 @@ class ExpressionParser:
     def _postfix(self, no_gt):
         v = self._primary()
         while True:
-            tok = self.s.peek()
-            if tok.kind != "op" or tok.text not in (".", "["):
+            tok = self._after(v)
+            if tok is None or tok.kind != "op" or tok.text not in (".", "["):
                 return v
             self.s.next()
             if tok.text == "[":
@@ -226,7 +232,7 @@ class ExpressionParser:
         while not self._is_op(">"):
             if self._is_op(","):
                 self.s.next()
-            if self.s.peek().kind in ("eof", "stop"):
+            if self.s.peek(0, expand=False).kind in ("eof", "stop"):
                 break
             comps.append(self.parse(no_gt=True))
         self.expect(">")
@@ -341,7 +347,7 @@ class ExpressionParser:
             if word.startswith("srgb"):
                 col[:3] = [srgb_to_linear(float(c)) for c in col[:3]]
         while True:
-            nxt = self.s.peek()
+            nxt = self.s.peek(0, expand=False)
             if nxt.kind != "ident" or nxt.text not in _COLOUR_MODIFIERS:
                 # POV-Ray keeps colours in single precision (RGBFTColour of float)
                 return col.astype(np.float32).astype(np.float64)

@@ -57,7 +57,8 @@ class SceneReader:
 
     def __init__(self, path: Path, constants: dict[str, object],
                  library_paths: Sequence[Path] = (), declares: Mapping[str, object] | None = None):
-        self.stream = DirectiveStream(path, library_paths, constants, dict(declares or {}))
+        predefined = {k: v if isinstance(v, str) else float(v) for k, v in (declares or {}).items()}
+        self.stream = DirectiveStream(path, library_paths, constants, predefined)
         self.stream.on_abandon = self._loop_abandoned
         self.camera: object = None
         self.camera_frames: list[Frame] = []  # the loops the camera statement was read in
@@ -83,7 +84,7 @@ class SceneReader:
                     break
                 if tok.kind != "ident":
                     continue
-                nxt = ds.peek()
+                nxt = ds.peek(0, expand=False)
                 if nxt.kind != "op" or nxt.text != "{":
                     continue
                 if tok.text == "camera":

@@ -55,10 +55,10 @@ class TransformReader:
         if tok.text != "<":
             raise SdlEvalError(f"{tok.where}: expected '<' after matrix")
         vals = [as_float(self.expr.parse(no_gt=True), "matrix entry")]
-        while self.stream.peek().text != ">":
-            if self.stream.peek().text == ",":
+        while self.stream.peek(0, expand=False).text != ">":
+            if self.stream.peek(0, expand=False).text == ",":
                 self.stream.next()
-            if self.stream.peek().kind in ("eof", "stop"):
+            if self.stream.peek(0, expand=False).kind in ("eof", "stop"):
                 break
             vals.append(as_float(self.expr.parse(no_gt=True), "matrix entry"))
         self.expr.expect(">")

@@ -285,7 +285,7 @@ def test_plan_auto_succeeds_on_a_backdrop_scene(tmp_path):
     assert 13900 < n["far_distance_mm"] < 14100               # the backdrop (14 m)
     rec = plan["depth_probe"]
     assert rec["depth_range"]["no_depth_pixels"] == 0 and "light fade" in rec["method"]
-    assert "scene_atmosphere" not in rec                       # the scene has no fog/media
+    assert "notes" not in plan                                 # the scene has no fog/media
     assert not list(out.glob(".probe.*"))
 
 
@@ -301,8 +301,8 @@ def test_the_scenes_own_fog_and_media_are_noted_once(tmp_path):
     a, b = (p.decision.numbers for p in plans.values())
     assert a["near_distance_mm"] == b["near_distance_mm"]
     assert a["far_distance_mm"] == b["far_distance_mm"]
-    assert plans["plain"].depth_probe.scene_atmosphere is None
-    note = plans["fog"].depth_probe.scene_atmosphere
+    assert plans["plain"].notes == []
+    (note,) = plans["fog"].notes
     assert "fog" in note and "does not see" in note
     text = (tmp_path / "fog" / "out" / "plan.json").read_text()
     assert text.count("does not see") == 1

@@ -138,7 +138,7 @@ def test_the_focus_source_and_the_depth_probe_record_round_trip(tmp_path):
     from povlens.plan.schema import DepthProbeRecord
     old = read_plan(DATA / "plan_v1_pinhole.json")
     assert old.inputs.focus_from is None and old.depth_probe is None
-    rec = DepthProbeRecord("light fade", "background inf", "the scene has fog",
+    rec = DepthProbeRecord("light fade", "background inf",
                            {"probe_pixels": 12, "no_depth_pixels": 3},
                            {"point_px": [3.5, 12.5], "rounds": 1})
     plan = dataclasses.replace(old, inputs=dataclasses.replace(
@@ -148,5 +148,37 @@ def test_the_focus_source_and_the_depth_probe_record_round_trip(tmp_path):
     assert d["depth_probe"]["depth_range"]["no_depth_pixels"] == 3
     write_plan(plan, tmp_path)
     assert read_plan(tmp_path) == plan
-    bare = dataclasses.replace(rec, scene_atmosphere=None, focus=None)
+    bare = dataclasses.replace(rec, focus=None)
     assert set(bare.to_dict()) == {"method", "treatment", "depth_range"}
+
+
+def test_the_povray_options_and_notes_round_trip_and_old_plans_have_none(tmp_path):
+    """Issue 13's POV-Ray options (inputs) and notes: written when set, read back equal."""
+    import dataclasses
+    old = read_plan(DATA / "plan_v1_pinhole.json")
+    assert (old.inputs.library_paths, old.inputs.clock, old.inputs.povray_options) == ((), None, ())
+    assert old.notes == []
+    plan = dataclasses.replace(
+        old, inputs=dataclasses.replace(old.inputs, library_paths=("/scenes/inc",), clock=0.5,
+                                        povray_options=("+A0.3", "Jitter=off")),
+        notes=["the scene's focal blur is replaced"])
+    d = json.loads(plan_json(plan))
+    assert d["inputs"]["library_paths"] == ["/scenes/inc"] and d["inputs"]["clock"] == 0.5
+    assert d["inputs"]["povray_options"] == ["+A0.3", "Jitter=off"]
+    assert d["notes"] == ["the scene's focal blur is replaced"]
+    write_plan(plan, tmp_path)
+    back = read_plan(tmp_path)
+    assert back == plan and isinstance(back.inputs.library_paths, tuple)
+    plan.add_note("the scene's focal blur is replaced")          # once only
+    plan.add_note(None)
+    assert plan.notes == ["the scene's focal blur is replaced"]
+
+
+def test_the_fog_note_of_a_plan_written_before_notes_moves_to_the_notes(tmp_path):
+    d = json.loads((DATA / "plan_v1_pinhole.json").read_text())
+    d["depth_probe"] = {"method": "light fade", "treatment": "background inf",
+                        "scene_atmosphere": "the scene has fog: the depth probe does not see it"}
+    (tmp_path / "plan.json").write_text(json.dumps(d))
+    plan = read_plan(tmp_path)
+    assert plan.notes == ["the scene has fog: the depth probe does not see it"]
+    assert "scene_atmosphere" not in plan.to_dict()["depth_probe"]

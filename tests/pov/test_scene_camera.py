@@ -20,7 +20,7 @@ from povlens.errors import PovlensError
 from povlens.util.images import read_image
 from povlens.pov.mesh import pinhole_wrapper
 from povlens.util.files import write_text
-from povlens.pov.scene_camera import SceneCameraError, parse_scene_camera
+from povlens.pov.scene_camera import DEFAULT_CAMERA_NOTE, SceneCameraError, parse_scene_camera
 
 REPO = Path(__file__).resolve().parents[2]
 HAVE_POVRAY = shutil.which("povray") is not None
@@ -299,3 +299,35 @@ def test_unreadable_camera_is_skipped_when_a_later_one_wins(tmp_path):
     cam = parse_scene_camera(scene)
     np.testing.assert_allclose(cam.location, [0, 2, -5])
     assert cam.source.endswith("later.pov:7")
+
+
+def test_what_the_lens_replaces_is_said(tmp_path):
+    """Another projection, focal blur, a camera normal and proportions other than the
+    image's each get a note; a plain perspective camera gets none."""
+    cam = parse_scene_camera(_scene(tmp_path, "n", """
+        camera { orthographic location <0, 1, -5> look_at 0 right 2*x up y
+                 aperture 0.4 focal_point <0, 0, 1> blur_samples 20 normal { bumps 0.1 } }"""),
+        image_width=40, image_height=30)
+    assert cam.projection == "orthographic" and len(cam.replaced) == 4
+    assert "camera type orthographic" in cam.replaced[0]
+    assert "focal blur (aperture 0.4" in cam.replaced[1]
+    assert "normal" in cam.replaced[2]
+    assert "|right|/|up| = 2" in cam.replaced[3] and "40x30" in cam.replaced[3]
+    plain = parse_scene_camera(_scene(tmp_path, "p", "camera { location <0, 1, -5> look_at 0 }"),
+                               image_width=40, image_height=30)
+    assert plain.replaced == []
+
+
+def test_scene_without_camera_and_clock_notes(tmp_path):
+    none = parse_scene_camera(_scene(tmp_path, "none", "sphere { 0, 1 }"))
+    assert none.replaced == [DEFAULT_CAMERA_NOTE]
+    np.testing.assert_allclose(none.location, [0, 0, 0])
+    np.testing.assert_allclose(none.direction_vector, [0, 0, 1])
+    np.testing.assert_allclose(none.right_vector, [1.33, 0, 0])  # POV-Ray's Camera::Init
+    moving = _scene(tmp_path, "moving", "camera { location <clock*10, 1, -5> look_at 0 }")
+    assert any("moves with clock" in n for n in parse_scene_camera(moving).replaced)
+    at = parse_scene_camera(moving, clock=0.5)
+    np.testing.assert_allclose(at.location, [5, 1, -5])
+    assert at.replaced == []
+    still = _scene(tmp_path, "still", "#declare T = clock; camera { location <0, 1, -5> }")
+    assert parse_scene_camera(still).replaced == []

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from povlens.pov import sdl_directives
+from povlens.pov import sdl_flow
 from povlens.pov.scene_camera import SceneCameraError, parse_scene_camera
 from povlens.pov.sdl_include import default_library_paths, find_include
 from povlens.pov.sdl_reader import SceneReader, still_constants
@@ -196,7 +196,7 @@ def test_frame_values_of_a_still_and_of_a_clock(tmp_path):
 
 
 def test_long_loops_are_cut_and_what_they_assign_is_unknown(tmp_path, monkeypatch):
-    monkeypatch.setattr(sdl_directives, "MAX_LOOP_ITERATIONS", 50)
+    monkeypatch.setattr(sdl_flow, "MAX_LOOP_ITERATIONS", 50)
     scene = tmp_path / "long.pov"
     scene.write_text("#declare I = 0; #declare P = 0;\n"
                      "#while (I < 1000) #declare P = P + 1; #declare I = I + 1; #end\n"
@@ -247,3 +247,22 @@ def test_old_versions_modify_the_previous_camera(tmp_path):
     r = _read(tmp_path, "#version 3.1;\ncamera { location <0, 1, -5> look_at 0 }\n"
                         "camera { translate <1, 0, 0> }\n")
     np.testing.assert_allclose(r.camera.location, [1, 1, -5])
+
+
+def test_a_statement_that_cannot_be_read_is_skipped_alone(tmp_path):
+    """An unknown array index or value is skipped to its statement's end, not past the
+    macro body or the #if it is in (portfolio/__empty.pov lost its camera so)."""
+    r = _read(tmp_path, """
+        #macro Fill(Data)
+          #local A = array[2];
+          #local H = rand(seed(1));
+          #local A[H] = Data[0]
+          #local B = Data[1]
+          #declare After = 1;
+        #end
+        #if (1)
+          Fill(Unknown_Data)
+          #declare InIf = 2;
+        #end
+        camera { location <0, After + InIf, -5> }""")
+    np.testing.assert_allclose(r.camera.location, [0, 3, -5])
