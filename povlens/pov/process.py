@@ -450,6 +450,11 @@ def start_render(
         # the fatal-error log: a bare name, written into the image's folder
         log = tmp.parent / f".povlens-{os.getpid()}-{uuid.uuid4().hex[:12]}.log"
         stack.callback(lambda: log.unlink(missing_ok=True))
+        # POV-Ray keeps a render-state file (image name, suffix .pov-state) while it
+        # renders and removes it when done; a killed render leaves it behind.
+        state = tmp.with_suffix(".pov-state")
+        stack.callback(lambda: state.unlink(missing_ok=True))
+        stack.callback(lambda: (workdir / state.name).unlink(missing_ok=True))
         # Relative names where possible: POV-Ray's I/O restrictions permit the
         # working directory.
         inp = os.path.relpath(pov_path, workdir) if _inside(pov_path, workdir) else str(pov_path)

@@ -318,3 +318,18 @@ def test_a_chrt_that_cannot_set_the_policy_is_not_used(tmp_path, monkeypatch):
         assert (tmp_path / "a.exr").exists()
     finally:
         povray.priority_tools.cache_clear()
+
+
+def test_a_cancelled_render_leaves_no_render_state_file(tmp_path):
+    # POV-Ray writes IMAGE.pov-state while it renders; killed, it would stay behind
+    scene = tmp_path / "slow.pov"
+    scene.write_text("camera { location <0,0,-3> look_at 0 }\n"
+                     "light_source { <2,4,-3> color rgb 1 }\n"
+                     "sphere { 0, 1 pigment { granite } finish { reflection 0.3 } }\n")
+    job = povray.start_render(scene, tmp_path / "out.png", 2000, 1500,
+                              extra_args=["+A0.01", "+R5"])
+    deadline = time.monotonic() + 20
+    while not list(tmp_path.glob("*.pov-state")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    job.cancel()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["slow.pov"]
