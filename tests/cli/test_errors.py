@@ -149,8 +149,9 @@ def test_hints_of_other_errors_name_options_too():
 
 
 def test_the_scene_camera_hint_names_options_that_exist(tmp_path):
-    nocam = tmp_path / "nocam.pov"
-    nocam.write_text("#version 3.7;\nsphere { 0, 1 pigment { rgb 1 } }\n")
+    nocam = tmp_path / "userfn.pov"         # a camera placed by a user function
+    nocam.write_text("#version 3.7;\n#declare F = function(x) { 2 * x }\n"
+                     "camera { location <F(1), 0, -5> look_at 0 }\n")
     with pytest.raises(SceneCameraError) as info:
         parse_scene_camera(nocam)
     assert "--" not in str(info.value) and "hfov" not in str(info.value)

@@ -28,7 +28,6 @@ from conftest import ROOT, SHIPPED_LENSES
 #: Eight entries of the lentil database (provenance in tests/data/README.md).
 LENTIL = ROOT / "tests" / "data" / "lentil-lenses-subset.json"
 ENTRIES = json.loads(LENTIL.read_text())
-needs_lentil = pytest.mark.usefixtures()      # the data ship with the tests: never skipped
 
 #: lentil writes flat faces (and the iris) with a radius of 9999 or more.
 FLAT_RADIUS_MM = 9999.0
@@ -93,7 +92,6 @@ def lentil_dir(tmp_path_factory):
     return d
 
 
-@needs_lentil
 def test_the_subset_is_there():
     assert len(ENTRIES) == 8, LENTIL
 
