@@ -34,7 +34,7 @@ from pathlib import Path
 
 from povlens.errors import LensFileError, ParameterError
 from povlens.lens.import_common import ImportedLens, SourceRow, build_lens, decode_text
-from povlens.lens.prescription import LensPrescription
+from povlens.lens.prescription import LensPrescription, read_source_bytes
 
 __all__ = ["FLAT_RADIUS_MM", "LentilEntry", "list_lentil", "import_lentil", "read_lentil",
            "list_hint"]
@@ -72,15 +72,7 @@ class LentilEntry:
 def _load(path: str | os.PathLike) -> dict:
     """The database as a dict; LensFileError naming the file (and line) otherwise."""
     p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise LensFileError(p, None, "no such file",
-                            "give the path of a lentil lenses.json") from None
-    except IsADirectoryError:
-        raise LensFileError(p, None, "is a directory, not a lentil database") from None
-    except OSError as e:
-        raise LensFileError(p, None, f"cannot be read: {e.strerror}") from None
+    raw = read_source_bytes(p, "file", "give the path of a lentil lenses.json")
     try:
         data = json.loads(decode_text(raw))
     except json.JSONDecodeError as e:

@@ -51,7 +51,7 @@ from pathlib import Path
 from povlens.errors import LensFileError
 from povlens.lens.import_common import (ImportedLens, LensImportWarning, SourceRow, build_lens,
                                         decode_text)
-from povlens.lens.prescription import LensPrescription, sag_mm
+from povlens.lens.prescription import LensPrescription, read_source_bytes, sag_mm
 
 __all__ = ["ZmxSurface", "ZmxFile", "parse_zmx_text", "import_zmx", "read_zmx", "UNIT_MM"]
 
@@ -424,14 +424,7 @@ def import_zmx(path: str | os.PathLike, glasses: dict | None = None) -> Imported
         malformed line: the message names the file, line and surface.
     """
     p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise LensFileError(p, None, "no such file", "give the path of a Zemax .zmx file") from None
-    except IsADirectoryError:
-        raise LensFileError(p, None, "is a directory, not a .zmx file") from None
-    except OSError as e:
-        raise LensFileError(p, None, f"cannot be read: {e.strerror}") from None
+    raw = read_source_bytes(p, "file", "give the path of a Zemax .zmx file")
     source = str(p)
     f = parse_zmx_text(decode_text(raw), source)
     if len(f.surfaces) < 3:

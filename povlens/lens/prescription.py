@@ -39,7 +39,7 @@ from povlens.errors import LensClipWarning, LensFileError
 from povlens.util.resources import LENS_DIR
 from povlens.util.files import write_bytes
 
-__all__ = ["LensPrescription", "read_lens", "parse_lens_text", "write_lens", "format_lens",
+__all__ = ["LensPrescription", "read_lens", "read_source_bytes", "parse_lens_text", "write_lens", "format_lens",
            "sag_mm", "resolve_lens_path", "clip_to_physical_apertures"]
 
 AIR = 1.0
@@ -199,19 +199,29 @@ def resolve_lens_path(name: str | os.PathLike) -> Path:
     return p
 
 
+def read_source_bytes(path: str | os.PathLike, kind: str, hint: str,
+                      shown: str | os.PathLike | None = None) -> bytes:
+    """The bytes of a lens source file (a lens file, a lens database, a Zemax file).
+
+    Raises :class:`LensFileError` naming the file (``shown``, default ``path``) when it
+    is missing (with ``hint``), a folder, or unreadable; ``kind`` says what it should be.
+    """
+    shown = path if shown is None else shown
+    try:
+        return Path(path).read_bytes()
+    except FileNotFoundError:
+        raise LensFileError(shown, None, f"no such {kind}", hint) from None
+    except IsADirectoryError:
+        raise LensFileError(shown, None, f"is a directory, not a {kind}") from None
+    except OSError as e:
+        raise LensFileError(shown, None, f"cannot be read: {e.strerror}") from None
+
+
 def read_lens(path: str | os.PathLike) -> LensPrescription:
     """Read and validate a lens file.  Raises :class:`LensFileError` on bad input."""
     p = resolve_lens_path(path)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise LensFileError(path, None, "no such lens file",
-                            "give the path of a lens file, or the name of a bundled lens "
-                            "(see the lenses/ folder)") from None
-    except IsADirectoryError:
-        raise LensFileError(path, None, "is a directory, not a lens file") from None
-    except OSError as e:
-        raise LensFileError(path, None, f"cannot be read: {e.strerror}") from None
+    raw = read_source_bytes(p, "lens file", "give the path of a lens file, or the name of a "
+                            "bundled lens (see 'povlens lenses')", shown=path)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
