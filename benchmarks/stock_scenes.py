@@ -89,9 +89,11 @@ def group_of(message: str) -> str:
 
 
 def summarise(rows: list[dict]) -> str:
+    slow = [r for r in rows if r["povray_message"] == "timeout"]
     renders = [r for r in rows if r["povray_ok"]]
     planned = [r for r in renders if r["plan_exit"] == 0]
-    lines = [f"{len(rows)} scenes; POV-Ray renders {len(renders)}; povlens plan succeeds on "
+    lines = [f"{len(rows)} scenes; POV-Ray renders {len(renders)} "
+             f"({len(slow)} more not within the time limit, left out); povlens plan succeeds on "
              f"{len(planned)} of those ({100 * len(planned) / max(1, len(renders)):.1f} %); "
              f"tracebacks anywhere: {sum(r['traceback'] for r in rows)}", ""]
     groups = collections.Counter(group_of(r["plan_message"]) for r in renders

@@ -151,3 +151,14 @@ def test_public_api_at_the_package_root(name):
     assert name in povlens.__all__
     assert callable(getattr(povlens, name))
     assert getattr(povlens, name).__doc__, f"povlens.{name} has no docstring"
+
+
+def test_tests_use_public_names():
+    bad = []
+    for path in PACKAGE.parent.joinpath("tests").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("povlens"):
+                bad += [f"{path.name}:{node.lineno} imports {a.name} from {node.module}"
+                        for a in node.names
+                        if a.name.startswith("_") and not a.name.startswith("__")]
+    assert not bad, "\n".join(bad)
