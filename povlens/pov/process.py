@@ -46,7 +46,7 @@ from typing import IO, Iterable, Sequence
 from povlens.errors import PovrayError, UsageError
 from povlens.pov.executable import ENV_VAR, find_povray
 from povlens.pov.povray_options import PovrayOptions, as_povray_options
-from povlens.pov.povray_output import povray_error_text
+from povlens.pov.povray_output import error_in_wrapper, povray_error_text
 from povlens.util.files import atomic_output
 
 __all__ = [
@@ -535,6 +535,10 @@ class RenderJob:
         stderr = io.TextIOWrapper(io.BytesIO(self._err.read()), errors="replace").read()
         log_text = self._log.read_text(errors="replace") if self._log.exists() else ""
         if returncode != 0:
+            in_wrapper = error_in_wrapper(self.pov_path, self._workdir,
+                                          povray_error_text(stderr, log_text))
+            if in_wrapper is not None:
+                raise PovrayError(*in_wrapper)
             raise PovrayError(
                 f"POV-Ray failed on {self.pov_path} (exit status {returncode}):\n"
                 + povray_error_text(stderr, log_text)

@@ -60,7 +60,7 @@ from povlens.pupil.rays import ScenePlacement, sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
 from povlens.util.files import write_text
 from povlens.lens.paraxial import stopped_down
-from povlens.pov.povray_output import povray_error_text
+from povlens.pov.povray_output import error_in_wrapper, povray_error_text
 from povlens.pov.executable import find_povray
 from povlens.pov.process import (pixel_range_args, povray_command, povray_finished,
                                  render as povray_render, render_switches, start_povray)
@@ -268,6 +268,9 @@ class _SampleRenders:
         pov = self.samples / f"batch_{self.batch:03d}.pov"
         if proc.returncode != 0:
             stderr = (tmp / "stderr.txt").read_text(errors="replace")
+            in_wrapper = error_in_wrapper(pov, self.samples, povray_error_text(stderr, ""))
+            if in_wrapper is not None:
+                raise PovrayError(*in_wrapper)
             raise PovrayError(f"POV-Ray failed on {pov}, lens sample {k} (exit status "
                               f"{proc.returncode}):\n" + povray_error_text(stderr, ""),
                               "fix the scene, or run 'make' in the folder to see the command")
