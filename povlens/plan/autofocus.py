@@ -136,11 +136,16 @@ def _probe_window(opts: ConvertOptions, st: PlanStart, x: float, y: float,
     return d * (ray_directions(view) @ (fwd / np.linalg.norm(fwd))), view
 
 
-def _window_focus(axial: np.ndarray, label: str) -> tuple[float, dict]:
+def _window_focus(axial: np.ndarray, label: str, strict: bool = True) -> tuple[float, dict]:
     """The focus of a window of axial distances (its centre pixel's surface, median),
-    and the numbers behind it; :class:`ParameterError` if the centre has no depth."""
+    and the numbers behind it; :class:`ParameterError` if the centre has no depth
+    (unless not ``strict``: then the pixel with depth nearest to the centre counts)."""
     c = axial.shape[0] // 2
     centre = float(axial[c, c])
+    rows, cols = np.nonzero(np.isfinite(axial))
+    if not math.isfinite(centre) and not strict and rows.size:
+        k = int(np.argmin(np.hypot(rows - c, cols - c)))
+        centre = float(axial[rows[k], cols[k]])
     if not math.isfinite(centre):
         what = ("sees background (nothing: infinitely far)" if centre == math.inf else
                 "sees a surface whose distance the depth probe cannot measure (black, "
@@ -154,6 +159,41 @@ def _window_focus(axial: np.ndarray, label: str) -> tuple[float, dict]:
             "background_pixels": int(np.isposinf(axial).sum()),
             "no_depth_pixels": int(np.isnan(axial).sum())}
     return float(np.median(same)), info
+
+
+#: Pixels across the frame of the coarse probe that looks for a lit surface.
+SEARCH_WIDTH_PX = 48
+
+
+def nearest_lit_point(opts: ConvertOptions, st: PlanStart, fade: float
+                      ) -> tuple[float, float, str] | None:
+    """Where to focus when the frame's centre may see background or an unlit surface.
+
+    Probes the whole frame coarsely (:data:`SEARCH_WIDTH_PX` across); returns the
+    centre itself if it has depth there, else the point (output pixels) of the pixel
+    with depth nearest to the centre and its ``focus_from`` label, or None when
+    nothing in the frame has depth.
+    """
+    w, h = st.film.width_px, st.film.height_px
+    n_x = min(SEARCH_WIDTH_PX, w)
+    n_y = max(1, round(n_x * h / w))
+    coarse = Film(st.film.width_mm, st.film.height_mm, n_x, n_y)
+    view = ProbeView(st.povray_camera, coarse, st.mm_per_unit,
+                     str(Path(opts.scene).resolve()), fade, st.povray)
+    out = Path(opts.outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    d = start_probe(view, out, fade_distance=fade, keep_wrappers=False, prefix=".focus.",
+                    label=str(opts.scene)).result()
+    rows, cols = np.nonzero(np.isfinite(d))
+    if rows.size == 0:
+        return None
+    # distance to the centre in output pixels
+    px, py = (cols + 0.5) * w / n_x, (rows + 0.5) * h / n_y
+    k = int(np.argmin(np.hypot(px - w / 2.0, py - h / 2.0)))
+    if abs(px[k] - w / 2.0) <= w / n_x and abs(py[k] - h / 2.0) <= h / n_y:
+        return w / 2.0, h / 2.0, "depth probe at centre"
+    x, y = int(px[k]), int(py[k])
+    return x + 0.5, y + 0.5, f"depth probe at {x},{y} (nearest lit surface to the centre)"
 
 
 def measure_focus(opts: ConvertOptions) -> tuple[float, str, dict]:
@@ -171,9 +211,16 @@ def measure_focus(opts: ConvertOptions) -> tuple[float, str, dict]:
     focus = got[0] if got is not None else from_mm
     fade = focus
     st = start_plan(dataclasses.replace(opts, focus=focus, focus_from=label))
+    if opts.focus_at is None:
+        # the frame's centre: if it has no depth, the lit surface nearest to it
+        near = nearest_lit_point(opts, st, fade)
+        if near is None:
+            return from_mm, "default distance (no depth anywhere in the frame)", {
+                "point_px": None, "rounds": 0, "focus": from_mm}
+        x, y, label = near
     for rounds in range(1, MAX_ROUNDS + 1):
         axial, _ = _probe_window(opts, st, x, y, fade)
-        new, info = _window_focus(axial, label)
+        new, info = _window_focus(axial, label, strict=opts.focus_at is not None)
         # the point under the new focus's camera: moved by breathing?
         new_st = start_plan(dataclasses.replace(opts, focus=new, focus_from=label))
         shift = pixel_shift_px(st.povray_camera, new_st.povray_camera, st.film, x, y)

@@ -148,3 +148,31 @@ def test_window_camera_shoots_the_images_rays_and_the_shift_of_a_point():
     # the centre never moves; a point 12.5 px left of it moves by 10 % of that
     assert pixel_shift_px(cam, wider, film, 20.0, 15.0) == pytest.approx(0.0, abs=1e-9)
     assert pixel_shift_px(cam, wider, film, 7.5, 15.0) == pytest.approx(1.25, rel=1e-9)
+
+
+# Nothing at the centre of the frame: the camera looks along +z at empty sky; one lit
+# box stands off to the left, 4 ahead.
+OFF_CENTRE = textwrap.dedent("""\
+    #version 3.7;
+    global_settings { assumed_gamma 1 }
+    CAMERA
+    light_source { <0, 3, -2> color rgb 1 }
+    box { <-1.2, -0.3, 4>, <-0.6, 0.3, 4.5> pigment { rgb 0.8 } }
+    """)
+
+
+@needs_povray
+def test_autofocus_takes_the_lit_surface_nearest_to_an_empty_centre(tmp_path):
+    code, plan = _convert(tmp_path, DIRECTION, scene=OFF_CENTRE)
+    assert code == 0
+    assert "nearest lit surface" in plan["inputs"]["focus_from"]
+    assert plan["inputs"]["focus"] == pytest.approx(4.0, rel=0.03)
+
+
+@needs_povray
+def test_autofocus_with_nothing_in_the_frame_uses_the_default_distance(tmp_path):
+    empty = "#version 3.7;\nCAMERA\nlight_source { <0, 3, -2> color rgb 1 }\n"
+    code, plan = _convert(tmp_path, DIRECTION, scene=empty)
+    assert code == 0
+    assert plan["inputs"]["focus_from"].startswith("default distance")
+    assert plan["inputs"]["focus"] == pytest.approx(5.0)
