@@ -230,17 +230,26 @@ class _SampleRenders:
         pv = self.plan.povray
         pov = self.samples / f"batch_{self.batch:03d}.pov"
         tmp = Path(tempfile.mkdtemp(prefix=f".sample_{k:04d}.", dir=self.samples))
-        rel = os.path.relpath(tmp, self.samples)
-        switches = render_switches(
-            "f.exr", pv.render_width, pv.render_height, threads=1,
-            library_paths=[Path(self.plan.inputs.scene).parent],
-            povray_options=self.povray_options,
-            extra_args=[*MESH_SWITCHES, f"Declare=PovlensFrame={k}",
-                        *film_row_args(pv, self.plan.rows_of_sample(k))])
-        cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
-        with open(tmp / "stderr.txt", "w") as err:
-            proc = start_povray(cmd, self.samples, err)
-        self.running[k] = (proc, tmp, time.perf_counter())
+        try:        # until the process is tracked, the folder is this call's to remove
+            rel = os.path.relpath(tmp, self.samples)
+            switches = render_switches(
+                "f.exr", pv.render_width, pv.render_height, threads=1,
+                library_paths=[Path(self.plan.inputs.scene).parent],
+                povray_options=self.povray_options,
+                extra_args=[*MESH_SWITCHES, f"Declare=PovlensFrame={k}",
+                            *film_row_args(pv, self.plan.rows_of_sample(k))])
+            cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
+            with open(tmp / "stderr.txt", "w") as err:
+                proc = start_povray(cmd, self.samples, err)
+            self.running[k] = (proc, tmp, time.perf_counter())
+        except BaseException:
+            if k in self.running:
+                raise           # tracked: abort() stops it and removes the folder
+            if "proc" in locals():
+                proc.kill()
+                proc.wait()
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
 
     def _finished(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
         """POV-Ray exited, or wrote and closed its image (it then idles ~0.3 s
