@@ -169,10 +169,10 @@ def nearest_lit_point(opts: ConvertOptions, st: PlanStart, fade: float
                       ) -> tuple[float, float, str] | None:
     """Where to focus when the frame's centre may see background or an unlit surface.
 
-    Probes the whole frame coarsely (:data:`SEARCH_WIDTH_PX` across); returns the
-    centre itself if it has depth there, else the point (output pixels) of the pixel
-    with depth nearest to the centre and its ``focus_from`` label, or None when
-    nothing in the frame has depth.
+    Probes the whole frame coarsely (:data:`SEARCH_WIDTH_PX` across; only when the
+    window at the centre found no depth); returns the centre itself if it has depth
+    there, else the point (output pixels) of the pixel with depth nearest to the centre
+    and its ``focus_from`` label, or None when nothing in the frame has depth.
     """
     w, h = st.film.width_px, st.film.height_px
     n_x = min(SEARCH_WIDTH_PX, w)
@@ -211,15 +211,16 @@ def measure_focus(opts: ConvertOptions) -> tuple[float, str, dict]:
     focus = got[0] if got is not None else from_mm
     fade = focus
     st = start_plan(dataclasses.replace(opts, focus=focus, focus_from=label))
-    if opts.focus_at is None:
-        # the frame's centre: if it has no depth, the lit surface nearest to it
-        near = nearest_lit_point(opts, st, fade)
-        if near is None:
-            return from_mm, "default distance (no depth anywhere in the frame)", {
-                "point_px": None, "rounds": 0, "focus": from_mm}
-        x, y, label = near
     for rounds in range(1, MAX_ROUNDS + 1):
         axial, _ = _probe_window(opts, st, x, y, fade)
+        if rounds == 1 and opts.focus_at is None and not np.isfinite(axial).any():
+            # nothing with depth around the frame's centre: the lit surface nearest to it
+            near = nearest_lit_point(opts, st, fade)
+            if near is None:
+                return from_mm, "default distance (no depth anywhere in the frame)", {
+                    "point_px": None, "rounds": 0, "focus": from_mm}
+            x, y, label = near
+            axial, _ = _probe_window(opts, st, x, y, fade)
         new, info = _window_focus(axial, label, strict=opts.focus_at is not None)
         # the point under the new focus's camera: moved by breathing?
         new_st = start_plan(dataclasses.replace(opts, focus=new, focus_from=label))
