@@ -28,11 +28,11 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.stats import qmc
 
 from povlens.lens.film import Film
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_film
+from povlens.pupil.sampling import sobol_points
 
 __all__ = ["ScenePlacement", "SampleRays", "sample_points", "sample_rays"]
 
@@ -83,8 +83,7 @@ def sample_points(n_samples: int, height: int, width: int, seed: int = 0):
     Returns a function ``points(k) -> (H, W, 4)`` in [0, 1): components 0-1 are
     the sub-pixel jitter, 2-3 the pupil coordinates u of sample k.
     """
-    m = max(1, int(np.ceil(np.log2(max(n_samples, 1)))))
-    sobol = qmc.Sobol(d=4, scramble=True, seed=seed).random_base2(m)[:n_samples]
+    sobol = sobol_points(max(n_samples, 1), 4, seed=seed)
     shift = np.random.default_rng(seed + 1).random((height, width, 4))
 
     def points(k: int) -> np.ndarray:

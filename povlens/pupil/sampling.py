@@ -43,6 +43,7 @@ import numpy as np
 from povlens.errors import OpticsError, UsageError
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_film
+from povlens.util.signals import interrupts_deferred
 
 __all__ = ["sobol_points", "halton_points", "stratified_points", "lens_points",
            "cranley_patterson", "POINT_SETS", "PassFraction", "pass_fraction",
@@ -63,7 +64,8 @@ def sobol_points(n: int, d: int = 2, *, seed: int = 0) -> np.ndarray:
         return np.zeros((0, d))
     from scipy.stats import qmc  # heavy: imported when points are first needed
     m = max(0, math.ceil(math.log2(n)))
-    pts = qmc.Sobol(d=d, scramble=True, seed=seed).random_base2(m)[:n]
+    with interrupts_deferred():          # its Cython set-up would swallow a Ctrl-C
+        pts = qmc.Sobol(d=d, scramble=True, seed=seed).random_base2(m)[:n]
     return np.minimum(pts, np.nextafter(1.0, 0.0))
 
 

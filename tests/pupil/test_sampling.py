@@ -118,3 +118,15 @@ def test_pass_fraction_counts_traced_rays(cooke):
     assert np.all((pf.fraction > 0.95) & (pf.fraction <= 1.0))
     naive = NaiveRearElement.build(lens, fd, 17.5)
     assert np.all(pass_fraction(naive, lens, fd, [0.0, 10.0], n_samples=256).fraction < 0.9)
+
+
+def test_interrupts_are_deferred_not_lost(monkeypatch):
+    # a Ctrl-C inside the guarded block arrives after it, as KeyboardInterrupt
+    import signal
+    from povlens.util.signals import interrupts_deferred
+    ran_to_end = False
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_deferred():
+            signal.raise_signal(signal.SIGINT)
+            ran_to_end = True
+    assert ran_to_end
