@@ -361,7 +361,7 @@ def run_bench(s: BenchSettings, quiet: bool = False) -> tuple[list[Row], str]:
         d = work / name
         convert(ConvertOptions(scene=s.scene, lens=lens, focus=s.focus, outdir=str(d),
                                width=s.width, height=s.height, method=method, samples=n,
-                               batch_size=math.ceil(n / jobs), seed=seed))
+                               batch_size=math.ceil(n / jobs), seed=seed, ray_mesh="pixel"))
         return d
 
     try:

@@ -47,7 +47,8 @@ import numpy as np
 from povlens.lens.frames import vertex_z_mm
 from povlens.lens.prescription import LensPrescription
 
-__all__ = ["TraceResult", "trace_from_film", "trace_from_scene", "BACKWARD_TOLERANCE_MM"]
+__all__ = ["TraceResult", "UnclippedTrace", "trace_from_film", "trace_from_scene",
+           "trace_unclipped_from_film", "BACKWARD_TOLERANCE_MM"]
 
 #: A ray that meets a surface more than this far *behind* itself is blocked.
 BACKWARD_TOLERANCE_MM = 1e-9
@@ -102,6 +103,105 @@ def trace_from_scene(lens: LensPrescription, film_distance_mm: float, origin_mm,
     return _trace(lens, film_distance_mm, o, d, toward_film=True)
 
 
+def _intersect(c: float, vertex_z: float, x, y, z, dx, dy, dz, sense: float):
+    """Where rays meet surface (curvature ``c``, vertex at ``vertex_z``): the hit
+    point in local (x, y, s) and the rays that miss it, meet it behind themselves,
+    land on the far branch or travel against ``sense`` (module docstring)."""
+    ps = vertex_z - z
+    ds = -dz
+    B = c * (x * dx + y * dy + ps * ds) - ds
+    C = c * (x * x + y * y + ps * ps) - 2.0 * ps
+    D = B * B - c * C
+    sqrtD = np.sqrt(np.maximum(D, 0.0))
+    sigma = -np.sign(ds)
+    same = (np.sign(B) == sigma) | (B == 0.0)
+    t = np.where(same, -C / (B + sigma * sqrtD), (sigma * sqrtD - B) / (c if c != 0 else 1.0))
+    hx, hy = x + t * dx, y + t * dy
+    hs = ps + t * ds
+    bad = ((D < 0.0) | ~np.isfinite(t) | (t < -BACKWARD_TOLERANCE_MM)
+           | (np.sign(ds) != sense) | (1.0 - c * hs <= 0.0))
+    return hx, hy, hs, bad
+
+
+def _refract(mu: float, c: float, hx, hy, hs, dx, dy, dz, sense: float):
+    """Directions after refraction at the hit points (index ratio ``mu`` = n1/n2),
+    and the rays totally reflected or turned back."""
+    ds = -dz
+    nx, ny, ns = -c * hx, -c * hy, 1.0 - c * hs
+    cos_i = nx * dx + ny * dy + ns * ds
+    k2 = 1.0 - mu * mu * (1.0 - cos_i * cos_i)
+    g = np.sign(cos_i) * np.sqrt(np.maximum(k2, 0.0)) - mu * cos_i
+    ex, ey, es = mu * dx + g * nx, mu * dy + g * ny, mu * ds + g * ns
+    en = np.sqrt(ex * ex + ey * ey + es * es)
+    ex, ey, es = ex / en, ey / en, es / en
+    bad = (k2 < 0.0) | (np.sign(es) != sense) | ~np.isfinite(en) | (en == 0.0)
+    return ex, ey, -es, bad
+
+
+@dataclasses.dataclass(frozen=True)
+class UnclippedTrace:
+    """Rays traced from the film with every clear aperture ignored (camera frame).
+
+    The unclipped ray field continues the lens's rays smoothly across every
+    vignetting cut, which is what an interpolated ray mesh needs; the aperture
+    margins give the exact verdict of :func:`trace_from_film` without a second trace.
+
+    origin_mm : (n, 3) where each ray leaves the front surface (where ``exists`` is
+        False: the last point reached).
+    direction : (n, 3) unit directions after the front surface (likewise).
+    exists : (n,) bool, the ray meets every surface and refracts (no miss, no total
+        reflection), apertures aside.
+    margin_mm2 : (n, S) r_i^2 - h_i^2 at surface i (clear radius squared minus the
+        hit height squared; > 0 inside the aperture); -inf from the surface where
+        the ray stopped existing on.  ``passed`` is the verdict of :func:`trace_from_film`.
+    """
+
+    origin_mm: np.ndarray
+    direction: np.ndarray
+    exists: np.ndarray
+    margin_mm2: np.ndarray
+
+    @property
+    def passed(self) -> np.ndarray:
+        """(n,) the verdict of :func:`trace_from_film`: no margin negative."""
+        return self.exists & np.all(self.margin_mm2 >= 0.0, axis=1)
+
+
+def trace_unclipped_from_film(lens: LensPrescription, film_distance_mm: float, origin_mm,
+                              direction) -> UnclippedTrace:
+    """Trace rays from the film to the scene as :func:`trace_from_film` does, but
+    through every surface whatever its clear aperture, recording the margins.
+
+    origin_mm, direction : array-like (n, 3), camera frame (directions toward +z).
+    """
+    o, d = _as_rays(origin_mm, direction)
+    n, S = o.shape[0], lens.n_surfaces
+    zv = vertex_z_mm(lens.thickness_mm, float(film_distance_mm))
+    curv, r2max = lens.curvature_per_mm, lens.aperture_radius_mm ** 2
+    margin = np.full((n, S), -np.inf)
+    with np.errstate(all="ignore"):
+        norm = np.sqrt(np.einsum("ij,ij->i", d, d))
+        ok = np.isfinite(norm) & (norm > 0) & np.all(np.isfinite(o), axis=1)
+        d = np.where(ok[:, None], d / np.where(ok, norm, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
+        o = np.where(ok[:, None], o, 0.0)
+        x, y, z = o[:, 0].copy(), o[:, 1].copy(), o[:, 2].copy()
+        dx, dy, dz = d[:, 0].copy(), d[:, 1].copy(), d[:, 2].copy()
+        for i in range(S - 1, -1, -1):
+            c = curv[i]
+            hx, hy, hs, bad = _intersect(c, zv[i], x, y, z, dx, dy, dz, -1.0)
+            bad |= ~ok
+            margin[:, i] = np.where(bad, -np.inf, r2max[i] - (hx * hx + hy * hy))
+            if not lens.is_aperture[i]:
+                ex, ey, ez, tir = _refract(lens.index_after[i] / lens.index_before[i], c,
+                                           hx, hy, hs, dx, dy, dz, -1.0)
+                bad |= tir
+                dx, dy, dz = (np.where(bad, dx, ex), np.where(bad, dy, ey),
+                              np.where(bad, dz, ez))
+            x, y, z = np.where(bad, x, hx), np.where(bad, y, hy), np.where(bad, z, zv[i] - hs)
+            ok &= ~bad
+    return UnclippedTrace(np.stack([x, y, z], 1), np.stack([dx, dy, dz], 1), ok, margin)
+
+
 def _trace(lens: LensPrescription, film_distance_mm: float, o: np.ndarray, d: np.ndarray,
            toward_film: bool) -> TraceResult:
     n = o.shape[0]
@@ -131,32 +231,12 @@ def _trace(lens: LensPrescription, film_distance_mm: float, o: np.ndarray, d: np
             if idx.size == 0:
                 break
             c = curv[i]
-            ps = zv[i] - z
-            ds = -dz
-            B = c * (x * dx + y * dy + ps * ds) - ds
-            C = c * (x * x + y * y + ps * ps) - 2.0 * ps
-            D = B * B - c * C
-            sqrtD = np.sqrt(np.maximum(D, 0.0))
-            sigma = -np.sign(ds)
-            same = (np.sign(B) == sigma) | (B == 0.0)
-            t = np.where(same, -C / (B + sigma * sqrtD), (sigma * sqrtD - B) / (c if c != 0 else 1.0))
-            hx, hy = x + t * dx, y + t * dy
-            hs = ps + t * ds
-            bad = ((D < 0.0) | ~np.isfinite(t) | (t < -BACKWARD_TOLERANCE_MM)
-                   | (np.sign(ds) != sense) | (1.0 - c * hs <= 0.0)
-                   | (hx * hx + hy * hy > r2max[i]))
+            hx, hy, hs, bad = _intersect(c, zv[i], x, y, z, dx, dy, dz, sense)
+            bad |= hx * hx + hy * hy > r2max[i]
             if not aperture[i]:
                 n1, n2 = (n_before[i], n_after[i]) if toward_film else (n_after[i], n_before[i])
-                mu = n1 / n2
-                nx, ny, ns = -c * hx, -c * hy, 1.0 - c * hs
-                cos_i = nx * dx + ny * dy + ns * ds
-                k2 = 1.0 - mu * mu * (1.0 - cos_i * cos_i)
-                g = np.sign(cos_i) * np.sqrt(np.maximum(k2, 0.0)) - mu * cos_i
-                ex, ey, es = mu * dx + g * nx, mu * dy + g * ny, mu * ds + g * ns
-                en = np.sqrt(ex * ex + ey * ey + es * es)
-                ex, ey, es = ex / en, ey / en, es / en
-                bad |= (k2 < 0.0) | (np.sign(es) != sense) | ~np.isfinite(en) | (en == 0.0)
-                dx, dy, dz = ex, ey, -es
+                dx, dy, dz, tir = _refract(n1 / n2, c, hx, hy, hs, dx, dy, dz, sense)
+                bad |= tir
             x, y, z = hx, hy, zv[i] - hs
             if bad.any():
                 lost = idx[bad]

@@ -5,8 +5,9 @@ derives what does not depend on the method or the sample count: the focused
 lens, the film, the thin-lens model and POV-Ray's camera (cheap: no pupil
 table).  :func:`finish_plan` adds the exit-pupil table (kept in
 OUTDIR/pupil.npz), the model's measured error, POV-Ray's image size and the
-lens-sample batches.  ``--method auto`` (:mod:`povlens.plan.convert`) runs its
-depth probe between the two steps and finishes the plan of the method it chooses.
+lens-sample batches (a pinhole plan needs neither the table nor the error, and
+skips them).  ``--method auto`` (:mod:`povlens.plan.convert`) runs its depth probe
+between the two steps and finishes the plan of the method it chooses.
 
 Scene units: ``units`` says what one scene unit is (the lens is in mm).  The
 focus distance is measured from the camera ``location``, where the lens's
@@ -50,7 +51,12 @@ from povlens.thinlens.model_error import measure_model_error
 
 __all__ = ["PlanStart", "start_plan", "finish_plan", "make_plan", "make_plan_with_lens",
            "camera_focus", "film_of", "camera_notes", "round_robin_batches",
-           "run_in_background", "MESH_ANTIALIAS_NOTE"]
+           "run_in_background", "MESH_ANTIALIAS_NOTE", "PINHOLE_NOTE"]
+
+#: The note of a pinhole plan, which skips what only the lens's blur needs
+#: (:func:`finish_plan`); ``model_error`` is then empty.
+PINHOLE_NOTE = ("method pinhole: no thin-lens model error or exit-pupil table was computed "
+                "(a pinhole render needs neither; plan.json's model_error is empty)")
 
 #: The note of a mesh plan whose ``povray_options`` turn anti-aliasing on.
 MESH_ANTIALIAS_NOTE = (
@@ -381,7 +387,28 @@ def _inputs(opts: ConvertOptions, st: PlanStart) -> Inputs:
         camera_from=st.camera_from, focus_from=st.focus_from,
         focus_at=None if opts.focus_at is None else tuple(int(v) for v in opts.focus_at),
         library_paths=st.povray.library_paths, clock=st.povray.clock,
-        povray_options=st.povray.extra_options)
+        povray_options=st.povray.extra_options,
+        ray_mesh=opts.ray_mesh if opts.method == "mesh" else None)
+
+
+def _field_mesh(opts: ConvertOptions, plan: Plan, st: PlanStart, placement, table) -> None:
+    """Give a mesh plan of ``--ray-mesh field`` its certified field meshes and the
+    render size they need (:mod:`povlens.plan.field_grid`)."""
+    if opts.ray_mesh not in ("field", "pixel"):
+        raise ParameterError("ray_mesh", opts.ray_mesh, f"ray_mesh={opts.ray_mesh!r}: unknown "
+                             "kind of ray mesh", "use field or pixel")
+    if opts.method != "mesh" or opts.ray_mesh != "field":
+        return
+    from povlens.plan.field_grid import choose_field_mesh
+    film = plan.film
+    plan.field_mesh, why_not = choose_field_mesh(st.lens, st.film_distance_mm, film, table,
+                                                 placement, plan.lens.efl_mm, plan.povray.version)
+    if plan.field_mesh is None:
+        plan.inputs = dataclasses.replace(plan.inputs, ray_mesh="pixel")
+        plan.add_note(why_not)
+        return
+    plan.povray = PovraySettings(plan.povray.version, film.width_px + 1, film.height_px + 1,
+                                 1, 1)
 
 
 def _antialias_note(opts: ConvertOptions, st: PlanStart) -> str | None:
@@ -405,13 +432,14 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_
     pupil_table, model_error : already computed for the same lens, focus and film
         (they do not depend on the method or the samples); default: the table of
         OUTDIR/pupil.npz if current, else built (and saved there), and the model
-        error measured.
+        error measured.  A pinhole plan given neither computes neither: its table
+        is None, its ``model_error`` empty, and :data:`PINHOLE_NOTE` says so.
     version : called for POV-Ray's version (a background lookup may be passed).
 
     Returns
     -------
-    (Plan, PupilTable)
-        The plan and the exit-pupil table it used.
+    (Plan, PupilTable or None)
+        The plan and the exit-pupil table it used (None: a pinhole plan's).
     """
     lens, p, film, model = st.lens, st.paraxial, st.film, st.thin_lens
     # pupil.rays loads scipy.stats (~0.4 s): not before the inputs are validated
@@ -419,7 +447,12 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_
     placement = ScenePlacement.at_entrance_pupil(st.location, st.right, st.up, st.forward,
                                                  model.centre_z_mm, st.mm_per_unit)
     table = pupil_table
-    if table is None:  # exact vignetting; saved in OUTDIR for the render to reuse
+    # a pinhole render needs neither the exit-pupil table nor the thin-lens model's
+    # error (issue 14: ~1 s of a 96x72 render); auto's pinhole keeps what it measured
+    skip = opts.method == "pinhole" and pupil_table is None and model_error is None
+    if skip:
+        model_error = {}
+    if table is None and not skip:  # exact vignetting; saved in OUTDIR for the render
         table, _ = cached_pupil_table(Path(opts.outdir) / "pupil.npz", lens,
                                       st.film_distance_mm, film.half_diagonal_mm,
                                       save=Path(opts.outdir).is_dir())
@@ -446,6 +479,8 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_
         sink_centre=_vector(default_sink_centre(st.location, st.forward)),
         batches=round_robin_batches(opts.samples, opts.batch_size), notes=list(st.notes))
     plan.add_note(_antialias_note(opts, st))
+    plan.add_note(PINHOLE_NOTE if skip else None)
+    _field_mesh(opts, plan, st, placement, table)
     return plan, table
 
 

@@ -54,6 +54,8 @@ class ConvertOptions:
     library_paths: tuple[str, ...] = ()  # POV-Ray's +L: folders for #include files
     clock: float | None = None         # POV-Ray's +K: the frame's clock (None: a still, 0)
     povray_options: tuple[str, ...] = ()  # further POV-Ray options, e.g. ("+A0.3",)
+    ray_mesh: str = "field"            # mesh: "field" (coarse interpolated meshes, one pupil
+                                       # point per sample) or "pixel" (a face per pixel)
 
 
 def povray_options_of(opts) -> PovrayOptions:

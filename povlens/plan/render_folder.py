@@ -80,6 +80,8 @@ def focal_blur_text(plan: Plan, outdir: Path, settings: FocalBlurSettings | None
 def _batch_wrapper(plan: Plan, outdir: Path) -> str:
     """Animation wrapper (templates/mesh_batch.pov.tmpl): frame k renders sample k."""
     scene = os.path.relpath(plan.inputs.scene, outdir / "samples")
+    if plan.field_mesh is not None:
+        return read_template("field_batch.pov.tmpl").substitute(scene_include=pov_string(scene))
     return read_template("mesh_batch.pov.tmpl").substitute(
         scene_include=pov_string(scene), sink_centre=pov_vector(plan.sink_centre),
         sink_radius=f"{SINK_RADIUS:.9g}")
@@ -121,12 +123,13 @@ def invalidate_outputs(outdir: Path, stale: list[int] | None = None) -> None:
     patterns = ["samples/*.done", "samples/*.timing.json", "image.exr",
                 "image.png", "view-*.exr"]
     if stale is None:
-        patterns += ["samples/*.exr", "samples/*.blocked", "samples/*.inc", "exposure.txt"]
+        patterns += ["samples/*.exr", "samples/*.blocked", "samples/*.inc", "samples/*.mask.npy",
+                     "exposure.txt"]
     for pattern in patterns:
         for f in outdir.glob(pattern):
             f.unlink()
     for k in stale or []:
-        for suffix in (".exr", ".weight.exr", ".blocked", ".inc"):
+        for suffix in (".exr", ".weight.exr", ".mask.npy", ".blocked", ".inc"):
             (outdir / "samples" / f"sample_{k:04d}{suffix}").unlink(missing_ok=True)
 
 

@@ -32,7 +32,8 @@ from povlens.util.files import write_text
 
 __all__ = ["SCHEMA_VERSION", "PLAN_FILE", "Inputs", "LensSummary", "FocusSolution",
            "CameraPlacement", "PovrayCamera", "PovraySettings", "FocalBlurSettings",
-           "Decision", "AdaptiveSampling", "DepthProbeRecord", "Plan", "plan_path", "read_plan",
+           "Decision", "AdaptiveSampling", "DepthProbeRecord", "FieldMeshSettings", "Plan",
+           "plan_path", "read_plan",
            "write_plan", "plan_json"]
 
 #: Version of the plan.json layout; :func:`read_plan` refuses any other.
@@ -122,11 +123,13 @@ class Inputs:
     library_paths: tuple[str, ...] = ()
     clock: float | None = None
     povray_options: tuple[str, ...] = ()
+    ray_mesh: str | None = None
 
-    #: Fields written only when set (--method auto's, the focus's source, and the
-    #: user's POV-Ray options): a plan without them reads and writes back unchanged.
+    #: Fields written only when set (--method auto's, the focus's source, the user's
+    #: POV-Ray options, the kind of ray mesh: None in plans before field meshes, which
+    #: render per-pixel meshes): a plan without them reads and writes back unchanged.
     AUTO_FIELDS = ("requested_method", "tolerance_px", "auto_samples", "focus_from", "focus_at",
-                   "library_paths", "clock", "povray_options")
+                   "library_paths", "clock", "povray_options", "ray_mesh")
 
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
@@ -221,12 +224,21 @@ class PovrayCamera:
 class PovraySettings:
     """POV-Ray's version and the image size rendered (pixels): ``render_height`` is
     the film's plus ``drop_top_rows``, the rows the composite drops (the POV-Ray
-    3.7.0.x mesh-camera row workaround, :func:`povlens.pov.mesh.render_size`)."""
+    3.7.0.x mesh-camera row workaround, :func:`povlens.pov.mesh.render_size`);
+    ``render_width`` the film's plus ``drop_right_columns`` (field meshes:
+    :func:`povlens.pov.field_mesh.uv_model`)."""
 
     version: str
     render_width: int
     render_height: int
     drop_top_rows: int
+    drop_right_columns: int = 0
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        if not self.drop_right_columns:     # plans before field meshes had none
+            del d["drop_right_columns"]
+        return d
 
 
 @dataclasses.dataclass(frozen=True)
@@ -337,6 +349,32 @@ class DepthProbeRecord:
         return _fields_of(cls, d)
 
 
+@dataclasses.dataclass(frozen=True)
+class FieldMeshSettings:
+    """The field ray meshes of a mesh plan (:mod:`povlens.plan.field_grid`): ``grid``
+    faces across and down, the direction encoding ``eps``, the pupil disc's radius
+    on the table's sampling plane, and the certification: the largest ray error
+    measured (``max_ray_error_px``, angle x focal length / pixel pitch;
+    ``max_origin_error_mm``) over ``pupil_points`` pupil points and ``pixels_checked``
+    pixels each."""
+
+    grid: tuple[int, int]
+    eps: float
+    pupil_disc_radius_mm: float
+    max_ray_error_px: float
+    max_origin_error_mm: float
+    pupil_points: int
+    pixels_checked: int
+    limit_px: float
+
+    def to_dict(self) -> dict:
+        return _json_ready(dataclasses.asdict(self))
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "FieldMeshSettings":
+        return _fields_of(cls, d, grid=(int(d["grid"][0]), int(d["grid"][1])))
+
+
 @dataclasses.dataclass
 class Plan:
     """Everything a render folder is rendered from (see the module docstring).
@@ -350,7 +388,10 @@ class Plan:
     depth probes run for it (None: none); ``notes`` what of the scene povlens replaces
     or ignores (its camera's projection, focal blur, ``normal``, proportions; its fog
     and media in the depth probe; options a render cannot use), one sentence each,
-    printed once by the command line (empty: nothing, and not written)."""
+    printed once by the command line (empty: nothing, and not written);
+    ``vignetting_map`` what the render of a pinhole or focal-blur view multiplied its
+    image by for the lens's vignetting (:mod:`povlens.rendering.vignetting`; None:
+    nothing, and not written)."""
 
     inputs: Inputs
     lens: LensSummary
@@ -369,6 +410,8 @@ class Plan:
     decision: Decision | None = None
     depth_probe: DepthProbeRecord | None = None
     notes: list[str] = dataclasses.field(default_factory=list)
+    vignetting_map: dict | None = None
+    field_mesh: FieldMeshSettings | None = None
 
     def add_note(self, text: str | None) -> None:
         """Add a note (:attr:`notes`) unless it is empty or already there."""
@@ -403,7 +446,7 @@ class Plan:
              "thin_lens": self.thin_lens.to_dict(),
              "povray_camera": dataclasses.asdict(self.povray_camera),
              "model_error": self.model_error,
-             "povray": dataclasses.asdict(self.povray),
+             "povray": self.povray.to_dict(),
              "sink_centre": self.sink_centre,
              "batches": self.batches}
         if self.sample_rows is not None:
@@ -416,6 +459,10 @@ class Plan:
             d["depth_probe"] = self.depth_probe.to_dict()
         if self.notes:
             d["notes"] = list(self.notes)
+        if self.vignetting_map is not None:
+            d["vignetting_map"] = self.vignetting_map
+        if self.field_mesh is not None:
+            d["field_mesh"] = self.field_mesh.to_dict()
         return _json_ready(d)
 
     @classmethod
@@ -448,7 +495,10 @@ class Plan:
             adaptive=None if adaptive is None else AdaptiveSampling.from_dict(adaptive),
             decision=None if decision is None else Decision.from_dict(decision),
             depth_probe=None if probe is None else DepthProbeRecord.from_dict(probe),
-            notes=notes)
+            notes=notes,
+            field_mesh=None if d.get("field_mesh") is None
+            else FieldMeshSettings.from_dict(d["field_mesh"]),
+            vignetting_map=d.get("vignetting_map"))
 
 
 def plan_path(path: str | os.PathLike) -> Path:

@@ -23,6 +23,7 @@ def composite(
     sample_paths: Sequence[str | os.PathLike],
     weight_arrays: Sequence[np.ndarray] | None = None,
     drop_top_rows: int = 0,
+    drop_right_columns: int = 0,
 ) -> np.ndarray:
     """Average sample images, returning float32 ``(H, W, C)`` linear light.
 
@@ -35,6 +36,8 @@ def composite(
     drop_top_rows : rows removed from the top of every image first (1 for the
         POV-Ray 3.7.0.x mesh_camera row workaround, see
         :func:`povlens.pov.mesh.render_size`).
+    drop_right_columns : columns removed from the right of every image first (1 for
+        field meshes, :func:`povlens.pov.field_mesh.uv_model`).
 
     Raises :class:`PovlensError` naming the offending file for unreadable
     images, mismatched sizes or bad weights.
@@ -42,9 +45,10 @@ def composite(
     paths = list(sample_paths)
     if not paths:
         raise PovlensError("nothing to composite: no sample images were given")
-    drop = int(drop_top_rows)
-    if drop < 0:
-        raise PovlensError(f"drop_top_rows must be >= 0, got {drop_top_rows}")
+    drop, right = int(drop_top_rows), int(drop_right_columns)
+    if drop < 0 or right < 0:
+        raise PovlensError(f"drop_top_rows and drop_right_columns must be >= 0, got "
+                           f"{drop_top_rows} and {drop_right_columns}")
     weights = None
     if weight_arrays is not None:
         weights = list(weight_arrays)
@@ -62,7 +66,10 @@ def composite(
             raise PovlensError(
                 f"image {p} has only {img.shape[0]} rows; cannot drop {drop} top row(s)"
             )
-        img = img[drop:]
+        if img.shape[1] <= right:
+            raise PovlensError(
+                f"image {p} has only {img.shape[1]} columns; cannot drop {right} column(s)")
+        img = img[drop:, :img.shape[1] - right]
         if shape is None:
             shape = img.shape
             total = np.zeros(shape, dtype=np.float64)

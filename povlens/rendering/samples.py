@@ -4,7 +4,8 @@ Work units and their outputs (each written under a temporary name, then renamed,
 so an interrupted run never leaves a half-written file at a final name):
 
 * batch b of the mesh method -> ``samples/sample_KKKK.exr`` (POV-Ray, linear),
-  ``samples/sample_KKKK.weight.exr`` (per-pixel radiometric weights, float32),
+  ``samples/sample_KKKK.weight.exr`` (per-pixel radiometric weights, float32; field
+  meshes: ``sample_KKKK.mask.npy``, :mod:`povlens.rendering.field_samples`),
   then the marker ``samples/batch_BBB.done`` (make's target; ``povlens render``
   renders every sample in one process and writes the markers after).  Samples are
   traced one at a time: the ray mesh (``sample_KKKK.inc``) is written and a
@@ -56,8 +57,10 @@ from povlens.pupil.sampling import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
 from povlens.rendering.composite import composite
 from povlens.util.images import read_image, write_exr, write_png_srgb
-from povlens.pupil.rays import ScenePlacement, sample_points, sample_rays
+from povlens.pupil.rays import sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
+from povlens.rendering.field_samples import (field_sample_weight, mask_path, placement_of,
+                                             write_field_sample)
 from povlens.util.files import write_text
 from povlens.lens.paraxial import stopped_down
 from povlens.pov.povray_output import error_in_wrapper, povray_error_text
@@ -66,7 +69,7 @@ from povlens.pov.process import (pixel_range_args, povray_command, povray_finish
                                  render as povray_render, render_switches, start_povray)
 from povlens.lens.prescription import read_lens
 
-__all__ = ["convert_and_render", "render_samples", "render_batch", "sample_rows",
+__all__ = ["convert_and_render", "render_samples", "render_batch", "sample_rows", "sample_weight",
            "samples_per_pixel", "render_view", "composite_outdir", "render_outdir",
            "pupil_table_for", "lens_for", "exposure_for", "film_row_args", "EarlyRender",
            "POVRAY_IN_FLIGHT", "MESH_SWITCHES"]
@@ -116,10 +119,27 @@ def _blocked_path(outdir: Path, k: int) -> Path:
 
 
 def _sample_done(outdir: Path, k: int) -> bool:
-    """Sample k's weights exist, and its image or the marker that it has none (all
-    its rays blocked: it is black with weight 0, never rendered)."""
+    """Sample k's weights (or pass mask: field meshes) exist, and its image or the
+    marker that it has none (all its rays blocked: it is black with weight 0, never
+    rendered)."""
     exr, weight, _ = _sample_paths(outdir, k)
-    return weight.exists() and (exr.exists() or _blocked_path(outdir, k).exists())
+    return ((weight.exists() or mask_path(outdir, k).exists())
+            and (exr.exists() or _blocked_path(outdir, k).exists()))
+
+
+def sample_weight(outdir: str | os.PathLike, k: int, plan: Plan | None = None,
+                  table=None) -> np.ndarray:
+    """(H, W) float32 radiometric weights of rendered lens sample k of a mesh folder
+    (0 where its rays are blocked or its rows do not reach): the weight image of
+    per-pixel meshes, computed from the pass mask for field meshes.  ``plan`` and
+    ``table`` (the pupil table) are read when not given."""
+    outdir = Path(outdir)
+    plan = read_plan(outdir) if plan is None else plan
+    if plan.field_mesh is None:
+        return read_image(_sample_paths(outdir, k)[1])[..., 0]
+    if table is None:
+        table = pupil_table_for(outdir, plan, lens_for(plan))
+    return field_sample_weight(plan, table, outdir, k)
 
 
 def sample_rows(plan: Plan, k: int) -> tuple[int, int]:
@@ -145,12 +165,22 @@ def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
     the ``sample(film_xy, u)`` protocol of :func:`povlens.pupil.rays.sample_rays`
     works).  ``points`` overrides the plan's (H, W, 4) sample points of sample k
     (default: :func:`povlens.pupil.rays.sample_points`); :mod:`povlens.bench`
-    uses both to render with the baseline samplers and random points.
+    uses both to render with the baseline samplers and random points.  A plan
+    with field meshes writes its sample with
+    :func:`povlens.rendering.field_samples.write_field_sample` (no ``points``).
     """
+    exr, weight_path, inc = _sample_paths(outdir, k)
+    if plan.field_mesh is not None:
+        if points is not None:
+            raise PovlensError("field-mesh samples share one pupil point per sample: "
+                               "they take no per-pixel sample points",
+                               "convert with --ray-mesh pixel")
+        if write_field_sample(plan, lens, table, outdir, k, inc):
+            return True
+        write_text(_blocked_path(outdir, k), "%d %d\n" % plan.rows_of_sample(k))
+        return False
     film = plan.film
-    pl = plan.placement
-    placement = ScenePlacement(np.array(pl.film_centre), np.array(pl.right), np.array(pl.up),
-                               np.array(pl.forward), pl.mm_per_unit)
+    placement = placement_of(plan)
     inp = plan.inputs
     if points is None:
         points = sample_points(inp.samples, film.height_px, film.width_px, inp.seed)(k)
@@ -161,7 +191,6 @@ def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
     r0, r1 = sample_rows(plan, k)
     rays = sample_rays(lens, plan.focus.film_distance_mm, film, table, placement, points,
                        rows=(r0, r1))  # rows this sample does not render: no rays, weight 0
-    exr, weight_path, inc = _sample_paths(outdir, k)
     valid, weight = rays.valid, rays.weight
     if not np.any(weight[r0:r1] > 0):
         # every ray of its rows blocked: black, weight 0, nothing to render
@@ -189,11 +218,16 @@ def film_row_args(povray: PovraySettings, rows: tuple[int, int]) -> list[str]:
     Returns
     -------
     list of str
-        Output row = film row + drop_top_rows (:func:`povlens.pov.process.pixel_range_args`).
+        Output row = film row + drop_top_rows (:func:`povlens.pov.process.pixel_range_args`);
+        the columns before ``drop_right_columns`` when there are such.
     """
     r0, r1 = rows
     drop = povray.drop_top_rows
-    return pixel_range_args(r0 + drop, r1 + drop, povray.render_height, "row")
+    cols = []
+    if povray.drop_right_columns:       # field meshes: the last column is not traced
+        cols = pixel_range_args(0, povray.render_width - povray.drop_right_columns,
+                                povray.render_width, "col")
+    return cols + pixel_range_args(r0 + drop, r1 + drop, povray.render_height, "row")
 
 
 #: POV-Ray switches of a lens sample's render after the user's options: no
@@ -396,13 +430,20 @@ def render_view(outdir: str | os.PathLike, view: str) -> Path:
         raise ParameterError("view", view, f"view={view!r}: unknown view",
                              "use pinhole or focal-blur")
     out = outdir / f"view-{view}.exr"
+    final = plan.inputs.method == view.replace("_", "-")
+    # the lens's vignetting as a per-pixel map, computed while POV-Ray renders
+    # (rendering/vignetting.py); the view itself stays as POV-Ray rendered it
+    from povlens.rendering.vignetting import start_vignetting_map
+    vignetting = None if not final else start_vignetting_map(
+        outdir, plan, lambda: pupil_table_for(outdir, plan, lens_for(plan)))
     if not out.exists():
         povray_render(outdir / name, out, film.width_px, film.height_px,
                       threads=os.cpu_count() or 1,
                       library_paths=[Path(plan.inputs.scene).parent],
                       povray_options=povray_options_of(plan.inputs))
-    if plan.inputs.method == view.replace("_", "-"):
-        _finish_image(outdir, read_image(out)[..., :3])
+    if final:
+        image = read_image(out)[..., :3]
+        _finish_image(outdir, image if vignetting is None else vignetting.apply(image))
     return out
 
 
@@ -445,12 +486,16 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
         image = np.zeros((film.height_px, film.width_px, 3))
     else:
         paths = [_sample_paths(outdir, k)[0] for k in rendered]
-        weights = [read_image(_sample_paths(outdir, k)[1])[..., 0].astype(np.float64)
-                   for k in rendered]
+        weights = [sample_weight(outdir, k, plan, table) for k in rendered]
         # sum w I / sum w, in float64 (composite.py); times sum w / N_p for the measurement
-        image = composite(paths, weights, drop_top_rows=drop)[..., :3].astype(np.float64)
+        image = composite(paths, weights, drop_top_rows=drop,
+                          drop_right_columns=plan.povray.drop_right_columns
+                          )[..., :3].astype(np.float64)
         if vignetting:
-            image *= (np.sum(weights, axis=0) * exposure / n_p[:, None])[..., None]
+            wsum = np.zeros(image.shape[:2])
+            for w in weights:
+                wsum += w
+            image *= (wsum * exposure / n_p[:, None])[..., None]
     if write:
         _finish_image(outdir, image.astype(np.float32))
     return image

@@ -209,3 +209,31 @@ def test_biconvex_singlet_focuses_paraxial_rays_at_thick_lens_bfl():
     res = tracer.trace_from_scene(lens, film, [[8.0, 0.0, z0]], [[0.0, 0.0, -1.0]])
     z_cross = res.origin_mm[0, 2] - res.origin_mm[0, 0] * res.direction[0, 2] / res.direction[0, 0]
     assert film - z_cross < bfl - 0.1
+
+
+# --- the unclipped trace (distribution-3 ray meshes) -------------------------------
+
+@pytest.mark.parametrize("name", ["dgauss.50mm", "wide.22mm", "fisheye.10mm", "telephoto.250mm"])
+def test_unclipped_trace_gives_the_clipped_verdict_and_rays(name):
+    """Its margins reproduce trace_from_film's verdict exactly, and where a ray
+    passes, its origin and direction are the same numbers."""
+    from povlens.lens.focus import focus
+    lens = read_lens(name)
+    fd = focus(lens, 4000.0).exact_film_distance_mm
+    rng = np.random.default_rng(3)
+    n = 20000
+    o = np.zeros((n, 3))
+    o[:, :2] = rng.uniform(-22, 22, (n, 2))
+    d = np.c_[rng.uniform(-1.2, 1.2, (n, 2)), np.ones(n)]
+    clipped = tracer.trace_from_film(lens, fd, o, d)
+    free = tracer.trace_unclipped_from_film(lens, fd, o, d)
+    assert np.array_equal(free.passed, clipped.passed)
+    assert 0 < clipped.passed.sum() < n
+    p = clipped.passed
+    assert np.array_equal(free.origin_mm[p], clipped.origin_mm[p])
+    assert np.array_equal(free.direction[p], clipped.direction[p])
+    # rays the apertures alone block still exist, with a finite state
+    blocked_by_rim = ~p & free.exists
+    assert blocked_by_rim.any()
+    assert np.all(np.isfinite(free.origin_mm)) and np.all(np.isfinite(free.direction))
+    assert not np.any(np.isnan(free.margin_mm2))

@@ -12,7 +12,8 @@ from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import PovraySettings
 from povlens.util.images import read_image
 from povlens.rendering.samples import (film_row_args, composite_outdir, render_outdir, sample_rows,
-                            samples_per_pixel)
+                                       sample_weight,
+                                       samples_per_pixel)
 
 from conftest import ROOT
 
@@ -74,7 +75,7 @@ def test_adaptive_render_matches_uniform_and_resumes(tmp_path):
     render_outdir(tmp_path / "a", jobs=2, quiet=True)
     adaptive = read_image(tmp_path / "a" / "image.exr")[..., :3].astype(np.float64)
     rows = plan.sample_rows
-    w = read_image(tmp_path / "a" / "samples" / f"sample_{n - 1:04d}.weight.exr")[..., 0]
+    w = sample_weight(tmp_path / "a", n - 1)
     r0, r1 = rows[n - 1]
     assert np.all(w[:r0] == 0) and np.all(w[r1:] == 0) and np.any(w[r0:r1] > 0)
     # unchanged inputs: nothing is rendered again
@@ -108,7 +109,7 @@ def test_adaptive_render_matches_uniform_and_resumes(tmp_path):
 
 def test_blocked_sample_is_not_rendered_and_counts_as_black(tmp_path, monkeypatch):
     import povlens.rendering.samples as render
-    convert(opts(tmp_path, "b", adaptive=False, samples=2, batch_size=2))
+    convert(opts(tmp_path, "b", adaptive=False, samples=2, batch_size=2, ray_mesh="pixel"))
     real = render.sample_rays
 
     def blocked_for_sample_1(lens, fd, film, table, placement, points, rows=None):

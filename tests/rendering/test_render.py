@@ -171,9 +171,14 @@ def test_samples_in_flight_render_the_same_image_as_one_at_a_time(tmp_path):
     many = tmp_path / "many"
     convert(opts(tmp_path, outdir=str(many), samples=6, batch_size=6))
     render_batch(many, 0, in_flight=6)
+    rendered = 0
     for k in range(6):
         name = f"samples/sample_{k:04d}.exr"
-        np.testing.assert_array_equal(read_image(many / name), read_image(one / name))
+        assert (many / name).exists() == (one / name).exists()   # or both all blocked
+        if (one / name).exists():
+            np.testing.assert_array_equal(read_image(many / name), read_image(one / name))
+            rendered += 1
+    assert rendered >= 4
     # the meshes and the per-sample temporary folders are gone
     assert not list((many / "samples").glob("*.inc"))
     assert not list((many / "samples").glob(".sample_*"))
@@ -196,12 +201,12 @@ def test_interrupting_render_stops_povray_and_resumes(tmp_path):
     out = tmp_path / "int"
     cmd = [sys.executable, "-m", "povlens", "render", str(SCENES / "paper.pov"), "--lens",
            "dgauss.50mm", "--focus", "4", "--width", "48", "--height", "36", "--method", "mesh",
-           "--samples", "24", "--batch-size", "12", "-o", str(out), "-q"]
+           "--samples", "48", "--batch-size", "24", "-o", str(out), "-q"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     import signal
     import time
     t0 = time.monotonic()
-    while not list((out / "samples").glob("sample_*.weight.exr")) if out.exists() else True:
+    while not list((out / "samples").glob("sample_*.mask.npy")) if out.exists() else True:
         assert proc.poll() is None and time.monotonic() - t0 < 120, "render ended too soon"
         time.sleep(0.02)
     proc.send_signal(signal.SIGINT)
@@ -212,11 +217,11 @@ def test_interrupting_render_stops_povray_and_resumes(tmp_path):
     assert subprocess.run(["pgrep", "-f", str(out)], capture_output=True).returncode == 1
     # no half-written files at final names; resuming finishes the render
     assert not (out / "image.exr").exists()
-    done = [k for k in range(24) if (out / "samples" / f"sample_{k:04d}.exr").exists()]
-    assert len(done) < 24
+    done = [k for k in range(48) if (out / "samples" / f"sample_{k:04d}.exr").exists()]
+    assert len(done) < 48
     render_outdir(out, quiet=True)
     full = tmp_path / "full"
-    convert(opts(tmp_path, outdir=str(full), samples=24, batch_size=12, method="mesh"))
+    convert(opts(tmp_path, outdir=str(full), samples=48, batch_size=24, method="mesh"))
     render_outdir(full, quiet=True)
     np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(full / "image.exr"))
 

@@ -1,0 +1,277 @@
+"""Field ray meshes: a coarse UV-mapped smooth ``mesh2`` whose interpolated rays stand
+for every pixel's exact lens ray of one lens sample (``mesh_camera`` distribution 3).
+
+What POV-Ray 3.7.0.10 computes (docs/reference/povray-mesh-camera.md §3.3; source
+``tracepixel.cpp``, ``mesh.cpp``; checked by a direction-readout render in the tests):
+a pixel's (u, v) selects the first face whose UV triangle contains it; its
+barycentrics B (from the UVs, in double) give origin = sum B_k P_k (float32
+vertices, then the mesh's transform) and, with ``smooth`` in the ``mesh_camera``
+block, direction = normalize(sum B_k N_k) (normals float32, normalised when parsed,
+mapped by the inverse transpose of the transform).
+
+**FS#261 (3.7.0.x).**  Rendered pixel (i, j) samples u = i / W', v = 1 - j / H' (its
+top-left corner), the last column and the first row clamped.  So a W x H image is
+rendered at W' x H' = (W + 1) x (H + 1) with the last column and row 0 not traced
+(``+EC{W} +SR2``) and both dropped; the UV map is built for that sampling, so output
+pixel (i, j) samples the image position (i + jx, j + jy), (jx, jy) the sample's
+sub-pixel offset: vertex (u, v) carries the ray of x = u W' + jx, y = (1 - v) H' - 1 + jy
+(:class:`UVModel`).  POV-Ray 3.8 fixed it (commit c8911315); its sampling was not
+measured, so :func:`uv_model` refuses other versions.
+
+**Encoding.**  The mesh is placed by ``matrix <M, T>`` with M = S R: R the camera basis
+(rows right, up, forward) and S = diag(eps, eps, 1).  A vertex stores the ray origin
+as ((p - T) R^T) / S, and its normal as normalize(d_cam S), so POV-Ray interpolates
+normalize(sum_k B_k d_k / |d_k S|): eps = 1 is the plain normalised lerp, eps -> 0
+interpolates linearly in the tangent (gnomonic) plane, exact for a pinhole or thin
+lens.  Rectilinear lenses want eps = 0.01, the fisheye eps = 1
+(docs/decisions/exact-lens-distribution3.md).
+
+**Fitted normals.**  The vertex normals are a least-squares fit to exact rays on a
+grid ``FIT_SUBDIVISION`` times finer than the mesh, which halves the largest error
+against interpolating the vertex rays.  The error is second order in the face size,
+so the grid needed grows with the square root of the image width.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from povlens.errors import PovlensError
+from povlens.lens.film import Film
+from povlens.lens.prescription import LensPrescription
+from povlens.pov.process import pixel_range_args
+from povlens.pupil.field import trace_field
+
+__all__ = ["UVModel", "uv_model", "FieldMesh", "build_field_mesh", "mesh2_text",
+           "placement_text", "FIT_SUBDIVISION", "MESH_NAME", "TRANSFORM_NAME"]
+
+#: The fit's sample grid is this many times finer than the mesh.
+FIT_SUBDIVISION = 3
+
+MESH_NAME = "PovlensRays"
+TRANSFORM_NAME = "PovlensPlace"
+
+
+@dataclasses.dataclass(frozen=True)
+class UVModel:
+    """How POV-Ray samples a distribution-3 mesh camera for a W x H image.
+
+    width, height : the output image (pixels).
+    render_width, render_height : what POV-Ray renders.
+    drop_top_rows, drop_right_columns : what is cut from the render.
+    jitter_px : (jx, jy) the sample's sub-pixel offset.
+    """
+
+    width: int
+    height: int
+    render_width: int
+    render_height: int
+    drop_top_rows: int
+    drop_right_columns: int
+    jitter_px: tuple[float, float]
+
+    def uv_to_image(self, u, v):
+        """Image position (x, y) (pixels) a UV point stands for."""
+        jx, jy = self.jitter_px
+        return (np.asarray(u) * self.render_width + jx,
+                (1.0 - np.asarray(v)) * self.render_height - self.drop_top_rows + jy)
+
+    def pixel_uv(self):
+        """(H, W) u and v POV-Ray samples for each output pixel."""
+        i = np.arange(self.width, dtype=float)[None, :]
+        j = np.arange(self.height, dtype=float)[:, None] + self.drop_top_rows
+        return (np.broadcast_to(i / self.render_width, (self.height, self.width)),
+                np.broadcast_to(1.0 - j / self.render_height, (self.height, self.width)))
+
+    def pixel_positions(self):
+        """(W,), (H,) image x and y where output pixel columns and rows are sampled."""
+        jx, jy = self.jitter_px
+        return np.arange(self.width) + jx, np.arange(self.height) + jy
+
+    def povray_switches(self, rows: tuple[int, int] | None = None) -> list[str]:
+        """+W/+H and the column and row ranges (film rows ``rows`` [r0, r1), default
+        all) that render exactly the output pixels."""
+        r0, r1 = (0, self.height) if rows is None else rows
+        return ([f"+W{self.render_width}", f"+H{self.render_height}"]
+                + pixel_range_args(0, self.width, self.render_width, "col")
+                + pixel_range_args(r0 + self.drop_top_rows, r1 + self.drop_top_rows,
+                                   self.render_height, "row"))
+
+
+def uv_model(width: int, height: int, jitter_px=(0.5, 0.5), version: str = "3.7.0.10") -> UVModel:
+    """The measured sampling of POV-Ray ``version`` (3.7.0.x only)."""
+    if not str(version).startswith("3.7.0"):
+        raise PovlensError(f"the field ray meshes are measured on POV-Ray 3.7.0.x only, "
+                           f"not {version}", "convert with --ray-mesh pixel")
+    return UVModel(int(width), int(height), int(width) + 1, int(height) + 1, 1, 1,
+                   (float(jitter_px[0]), float(jitter_px[1])))
+
+
+@dataclasses.dataclass(frozen=True)
+class FieldMesh:
+    """One lens sample's ray mesh, as POV-Ray will read it.
+
+    grid : (gx, gy) faces across and down (2 gx gy triangles).
+    uv : (V, 2) vertex UVs, V = (gx+1)(gy+1), row-major from v = 0 (image bottom).
+    image_xy : (V, 2) image positions the vertices stand for (pixels).
+    vertex : (V, 3) stored vertices; normal : (V, 3) stored unit normals.
+    matrix : (4, 3) the mesh's ``matrix`` (rows M then T).
+    faces : (F, 3) vertex indices.
+    exists : (V,) the vertex had an unclipped ray (else its neighbour's).
+    margin_mm2 : (V, S) aperture margins at the vertices.
+    fit_error_px : largest angle between a fitted direction and the exact ray at the
+        fit's sample points where the lens passes light, in pixels (angle x focal
+        length / pixel pitch); 0 where none passes.
+    """
+
+    grid: tuple[int, int]
+    uv: np.ndarray
+    image_xy: np.ndarray
+    vertex: np.ndarray
+    normal: np.ndarray
+    matrix: np.ndarray
+    faces: np.ndarray
+    exists: np.ndarray
+    margin_mm2: np.ndarray
+    fit_error_px: float
+    eps: float
+
+    def node_margins(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Node columns' image x (gx+1,), rows' image y (gy+1,) increasing, and the
+        margins (gy+1, gx+1, S) in that row order (for :func:`povlens.pupil.field_mask.pass_mask`)."""
+        gx, gy = self.grid
+        xs = self.image_xy[: gx + 1, 0]
+        ys = self.image_xy[:: gx + 1, 1]
+        order = np.argsort(ys)
+        m = self.margin_mm2.reshape(gy + 1, gx + 1, -1)[order]
+        return xs, ys[order], m
+
+
+def uv_grid(gx: int, gy: int, model: UVModel) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 2) vertex UVs on [u0, 1] x [0, 1] and (F, 3) faces.  u0 = -0.25 / W' keeps
+    column 0's samples (u = 0) strictly inside; UVs above 1 would overrun POV-Ray's
+    10 x 10 bins.  Cell (r, c) holds faces r gx + c (a, b, d) and F/2 + r gx + c (a, d, c)."""
+    u = np.linspace(-0.25 / model.render_width, 1.0, gx + 1)
+    v = np.linspace(0.0, 1.0, gy + 1)
+    U, V = np.meshgrid(u, v)
+    idx = np.arange((gx + 1) * (gy + 1)).reshape(gy + 1, gx + 1)
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    c, d = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    faces = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    return np.stack([U.ravel(), V.ravel()], 1), faces
+
+
+def locate_in_grid(grid: tuple[int, int], u0: float, pu, pv) -> tuple[np.ndarray, np.ndarray]:
+    """Face (n,) and barycentrics (n, 3) of UV points in a :func:`uv_grid` mesh, as
+    POV-Ray picks them (the first face in order containing the point)."""
+    gx, gy = grid
+    pu, pv = np.asarray(pu, float).ravel(), np.asarray(pv, float).ravel()
+    fu = (pu - u0) / (1.0 - u0) * gx
+    fv = pv * gy
+    c = np.clip(np.floor(fu).astype(int), 0, gx - 1)
+    r = np.clip(np.floor(fv).astype(int), 0, gy - 1)
+    su, sv = fu - c, fv - r
+    upper = su >= sv
+    face = np.where(upper, r * gx + c, gx * gy + r * gx + c)
+    B = np.where(upper[:, None], np.stack([1 - su, su - sv, sv], 1),
+                 np.stack([1 - sv, su, sv - su], 1))
+    return face, B
+
+
+def _fill_missing(values: np.ndarray, exists: np.ndarray, gx: int, gy: int) -> np.ndarray:
+    """Vertices without a ray take their nearest grid neighbour's (only vertices whose
+    neighbourhood is fully vignetted lack one; their faces carry no light)."""
+    if exists.all() or not exists.any():
+        return values
+    from scipy.ndimage import distance_transform_edt
+    _, (ii, jj) = distance_transform_edt(~exists.reshape(gy + 1, gx + 1), return_indices=True)
+    return values[(ii * (gx + 1) + jj).ravel()]
+
+
+def build_field_mesh(lens: LensPrescription, film_distance_mm: float, film: Film,
+                     plane_z_mm: float, pupil_xy_mm, placement, model: UVModel,
+                     grid: tuple[int, int], eps: float, pixel_angle_rad: float) -> FieldMesh:
+    """Trace and encode the ray mesh of one lens sample.
+
+    placement : :class:`povlens.pupil.rays.ScenePlacement` (camera frame -> world).
+    grid : (gx, gy); eps : the direction encoding's scale (module docstring).
+    pixel_angle_rad : the angle of one pixel at the image centre (pitch / focal
+        length), the unit of ``fit_error_px``.
+    """
+    gx, gy = int(grid[0]), int(grid[1])
+    uv, faces = uv_grid(gx, gy, model)
+    x, y = model.uv_to_image(uv[:, 0], uv[:, 1])
+    rays = trace_field(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, x, y)
+    R = placement.basis
+    S = np.array([eps, eps, 1.0])
+    origin = _fill_missing(rays.origin_mm, rays.exists, gx, gy)
+    direction = _fill_missing(rays.direction, rays.exists, gx, gy)
+    p = placement.points_to_world(origin)
+    T = 0.5 * (p.min(0) + p.max(0))
+    vertex = ((p - T) @ R.T) / S
+    normal = direction * S
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    normal, err = _fit_normals(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, model,
+                               (gx, gy), float(uv[0, 0]), faces, normal, S, pixel_angle_rad)
+    matrix = np.vstack([S[:, None] * R, T])
+    return FieldMesh((gx, gy), uv, np.stack([x, y], 1), vertex, normal, matrix, faces,
+                     rays.exists, rays.margin_mm2, err, float(eps))
+
+
+def _fit_normals(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, model, grid, u0,
+                 faces, normal0, S, pixel_angle_rad):
+    """Least-squares vertex normals n minimising sum_s |sum_k B_k(s) n_k - t_s|^2 over a
+    grid FIT_SUBDIVISION times finer than the mesh (t_s = normalize(d_s S), what a
+    vertex at s would store), only where the lens passes light; and the largest
+    angle left, in pixels.  Vertices no such sample touches keep their own ray
+    (weak prior)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spl
+    gx, gy = grid
+    k = FIT_SUBDIVISION
+    U, V = np.meshgrid(np.linspace(u0, 1.0, gx * k + 1), np.linspace(0.0, 1.0, gy * k + 1))
+    su, sv = U.ravel(), V.ravel()
+    x, y = model.uv_to_image(su, sv)
+    rays = trace_field(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, x, y)
+    use = rays.passed
+    if not use.any():
+        return normal0, 0.0
+    face, B = locate_in_grid(grid, u0, su[use], sv[use])
+    t = rays.direction[use] * S
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    n_s, n_v = int(use.sum()), len(normal0)
+    A = sp.csr_matrix((B.ravel(), (np.repeat(np.arange(n_s), 3), faces[face].ravel())),
+                      shape=(n_s, n_v))
+    lam = 1e-6
+    lu = spl.splu((A.T @ A + lam * sp.identity(n_v)).tocsc())
+    n = np.stack([lu.solve(A.T @ t[:, c] + lam * normal0[:, c]) for c in range(3)], 1)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    # what POV-Ray traces at the fit's samples: normalize(sum B n) mapped back by S^-1
+    d = (np.einsum("nk,nkd->nd", B, n.astype(np.float32).astype(float)[faces[face]])) / S
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    err = np.arcsin(np.clip(np.linalg.norm(np.cross(d, rays.direction[use]), axis=1), 0, 1))
+    return n, float(err.max() / pixel_angle_rad)
+
+
+def _rows(a: np.ndarray, fmt: str) -> str:
+    row = "<" + ",".join([fmt] * a.shape[1]) + ">"
+    return ",\n".join([row] * len(a)) % tuple(a.ravel().tolist())
+
+
+def mesh2_text(mesh: FieldMesh, name: str = MESH_NAME) -> str:
+    """``#declare NAME = mesh2 {...}``: vertex, normal and UV vectors (their indices
+    default to the face indices)."""
+    return (f"#declare {name} = mesh2 {{\n"
+            f"vertex_vectors {{ {len(mesh.vertex)},\n{_rows(mesh.vertex, '%.9g')}\n}}\n"
+            f"normal_vectors {{ {len(mesh.normal)},\n{_rows(mesh.normal, '%.9g')}\n}}\n"
+            f"uv_vectors {{ {len(mesh.uv)},\n{_rows(mesh.uv, '%.9g')}\n}}\n"
+            f"face_indices {{ {len(mesh.faces)},\n{_rows(mesh.faces, '%d')}\n}}\n}}\n")
+
+
+def placement_text(mesh: FieldMesh, name: str = TRANSFORM_NAME) -> str:
+    """``#declare NAME = transform { matrix <...> }`` placing the mesh in the world
+    (in double precision)."""
+    values = ", ".join("%.17g" % v for v in mesh.matrix.ravel())
+    return f"#declare {name} = transform {{ matrix <{values}> }}\n"
