@@ -34,6 +34,7 @@ FLAG_OF = {
     "plane": "--plane",
     "view": "--view",
     "width": "--width",
+    "ray_mesh": "--ray-mesh",
     "width_px": "--width",
     "height": "--height",
     "height_px": "--height",

@@ -26,7 +26,7 @@ import numpy as np
 
 from povlens.plan.schema import FieldMeshSettings
 from povlens.pov.field_emulation import ray_error_px
-from povlens.pov.field_mesh import build_field_mesh, uv_model
+from povlens.pov.field_mesh import build_field_mesh, lens_ray_field, uv_model
 from povlens.pupil.field import bounding_disc_radius_mm, concentric_disc_mm
 
 __all__ = ["choose_field_mesh", "certification_pupil_points", "pixel_subset", "TARGET_PX",
@@ -78,8 +78,9 @@ def _max_error(ctx, grid, eps, points, rows, cols) -> tuple[float, float]:
     lens, fd, film, plane_z, placement, pa, model = ctx
     worst, worst_origin = 0.0, 0.0
     for P in points:
-        mesh = build_field_mesh(lens, fd, film, plane_z, P, placement, model, grid, eps, pa)
-        e = ray_error_px(mesh, model, lens, fd, film, plane_z, P, placement, pa, rows, cols)
+        field = lens_ray_field(lens, fd, film, plane_z, P)
+        mesh = build_field_mesh(field, placement, model, grid, eps, pa)
+        e = ray_error_px(mesh, model, field, placement, pa, rows, cols)
         worst, worst_origin = max(worst, e["direction_px"]), max(worst_origin, e["origin_mm"])
     return worst, worst_origin
 

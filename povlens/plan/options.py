@@ -31,8 +31,8 @@ class ConvertOptions:
     film_diagonal_mm: float = 35.0
     film_size_mm: tuple[float, float] | None = None
     units: str = "m"
-    width: int = 160
-    height: int = 120
+    width: int = 640
+    height: int = 480
     method: str = "mesh"
     samples: int = 16
     batch_size: int | None = None      # samples per POV-Ray process; None = N / cores

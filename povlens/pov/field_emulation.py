@@ -5,7 +5,7 @@ the exact lens rays (the measure :mod:`povlens.plan.field_grid` certifies).
 (:mod:`povlens.pov.field_mesh`: FS#261 sampling, first containing face, float32
 vertices and normals, the mesh's matrix in double, ``smooth``); the tests check it
 against a direction-readout render.  :func:`ray_error_px` compares it with
-:func:`povlens.pupil.field.trace_field` at the same image positions.
+:func:`povlens.pupil.field.trace_field` (or any ray field) at the same image positions.
 """
 
 from __future__ import annotations
@@ -13,7 +13,6 @@ from __future__ import annotations
 import numpy as np
 
 from povlens.pov.field_mesh import FieldMesh, UVModel, locate_in_grid
-from povlens.pupil.field import trace_field
 
 __all__ = ["emulate", "ray_error_px"]
 
@@ -36,10 +35,10 @@ def emulate(mesh: FieldMesh, model: UVModel, rows=None, cols=None):
     return origin, d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-def ray_error_px(mesh: FieldMesh, model: UVModel, lens, film_distance_mm: float, film,
-                 plane_z_mm: float, pupil_xy_mm, placement, pixel_angle_rad: float,
+def ray_error_px(mesh: FieldMesh, model: UVModel, ray_field, placement, pixel_angle_rad: float,
                  rows=None, cols=None) -> dict:
-    """The rays POV-Ray traces against the exact ones, where the lens passes light.
+    """The rays POV-Ray traces against the exact ones (``ray_field``, as for
+    :func:`povlens.pov.field_mesh.build_field_mesh`), where the lens passes light.
 
     Returns
     -------
@@ -52,7 +51,7 @@ def ray_error_px(mesh: FieldMesh, model: UVModel, lens, film_distance_mm: float,
     if rows is None:
         rows, cols = (a.ravel() for a in np.mgrid[0:H, 0:W])
     px, py = model.pixel_positions()
-    exact = trace_field(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, px[cols], py[rows])
+    exact = ray_field(px[cols], py[rows])
     ok = exact.passed
     if not ok.any():
         return {"direction_px": 0.0, "origin_mm": 0.0, "pixels": 0}

@@ -44,7 +44,7 @@ from povlens.lens.prescription import LensPrescription
 from povlens.pov.process import pixel_range_args
 from povlens.pupil.field import trace_field
 
-__all__ = ["UVModel", "uv_model", "FieldMesh", "build_field_mesh", "mesh2_text",
+__all__ = ["UVModel", "uv_model", "FieldMesh", "lens_ray_field", "build_field_mesh", "mesh2_text",
            "placement_text", "FIT_SUBDIVISION", "MESH_NAME", "TRANSFORM_NAME"]
 
 #: The fit's sample grid is this many times finer than the mesh.
@@ -190,11 +190,23 @@ def _fill_missing(values: np.ndarray, exists: np.ndarray, gx: int, gy: int) -> n
     return values[(ii * (gx + 1) + jj).ravel()]
 
 
-def build_field_mesh(lens: LensPrescription, film_distance_mm: float, film: Film,
-                     plane_z_mm: float, pupil_xy_mm, placement, model: UVModel,
-                     grid: tuple[int, int], eps: float, pixel_angle_rad: float) -> FieldMesh:
+def lens_ray_field(lens: LensPrescription, film_distance_mm: float, film: Film,
+                   plane_z_mm: float, pupil_xy_mm):
+    """The ray field of one lens sample: ``field(x, y)`` -> :class:`povlens.pupil.field.FieldRays`
+    of image positions (pixels) toward the pupil point, traced unclipped."""
+    def field(x, y):
+        return trace_field(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, x, y)
+    return field
+
+
+def build_field_mesh(ray_field, placement, model: UVModel, grid: tuple[int, int], eps: float,
+                     pixel_angle_rad: float) -> FieldMesh:
     """Trace and encode the ray mesh of one lens sample.
 
+    ray_field : callable (x (n,), y (n,)) image positions (pixels) -> an object with
+        camera-frame ``origin_mm`` (n, 3), unit ``direction`` (n, 3), ``exists``,
+        ``margin_mm2`` (n, S) and ``passed`` (:func:`lens_ray_field`; any smooth field,
+        a thin lens's in the tests).
     placement : :class:`povlens.pupil.rays.ScenePlacement` (camera frame -> world).
     grid : (gx, gy); eps : the direction encoding's scale (module docstring).
     pixel_angle_rad : the angle of one pixel at the image centre (pitch / focal
@@ -203,25 +215,57 @@ def build_field_mesh(lens: LensPrescription, film_distance_mm: float, film: Film
     gx, gy = int(grid[0]), int(grid[1])
     uv, faces = uv_grid(gx, gy, model)
     x, y = model.uv_to_image(uv[:, 0], uv[:, 1])
-    rays = trace_field(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, x, y)
+    rays = ray_field(x, y)
     R = placement.basis
     S = np.array([eps, eps, 1.0])
-    origin = _fill_missing(rays.origin_mm, rays.exists, gx, gy)
     direction = _fill_missing(rays.direction, rays.exists, gx, gy)
+    origin = _fill_missing(rays.origin_mm, rays.exists, gx, gy)
     p = placement.points_to_world(origin)
     T = 0.5 * (p.min(0) + p.max(0))
     vertex = ((p - T) @ R.T) / S
     normal = direction * S
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    normal, err = _fit_normals(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, model,
-                               (gx, gy), float(uv[0, 0]), faces, normal, S, pixel_angle_rad)
+    normal, err = _fit_normals(ray_field, model, (gx, gy), float(uv[0, 0]), faces, normal, S,
+                               pixel_angle_rad)
     matrix = np.vstack([S[:, None] * R, T])
+    vertex = _separate_filled(vertex, faces, rays.exists)
     return FieldMesh((gx, gy), uv, np.stack([x, y], 1), vertex, normal, matrix, faces,
                      rays.exists, rays.margin_mm2, err, float(eps))
 
 
-def _fit_normals(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, model, grid, u0,
-                 faces, normal0, S, pixel_angle_rad):
+def _degenerate(vertex: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) faces POV-Ray drops: zero cross product of its float32 vertices."""
+    q = vertex.astype(np.float32).astype(np.float64)
+    a, b, c = q[faces[:, 0]], q[faces[:, 1]], q[faces[:, 2]]
+    return np.all(np.cross(a - b, c - b) == 0.0, axis=1)
+
+
+def _separate_filled(vertex: np.ndarray, faces: np.ndarray, exists: np.ndarray) -> np.ndarray:
+    """Move vertices that took a neighbour's ray (:func:`_fill_missing`) off their
+    neighbours, a little at random (fixed seed), until no face is degenerate: POV-Ray
+    drops degenerate faces, and their pixels would get no ray.  Such vertices lie
+    where the lens passes no light.  Refuses a mesh whose own rays make a degenerate
+    face (rays of neighbouring image positions starting at one point)."""
+    rng = np.random.default_rng(0)
+    scale = max(float(np.ptp(vertex[exists], axis=0).max()) if exists.any() else 1.0, 1e-9)
+    vertex = vertex.copy()
+    for _ in range(8):
+        bad = _degenerate(vertex, faces)
+        if not bad.any():
+            return vertex
+        movable = np.zeros(len(vertex), bool)
+        movable[faces[bad].ravel()] = True
+        movable &= ~exists
+        if not movable.any():
+            break
+        vertex[movable] += rng.uniform(-1, 1, (int(movable.sum()), 3)) * 1e-4 * scale
+    raise PovlensError("a field ray mesh has degenerate faces: the rays of neighbouring "
+                       "image positions start at the same point (an ideal thin lens?)",
+                       "start the rays a little along their directions, or render with "
+                       "--ray-mesh pixel")
+
+
+def _fit_normals(ray_field, model, grid, u0, faces, normal0, S, pixel_angle_rad):
     """Least-squares vertex normals n minimising sum_s |sum_k B_k(s) n_k - t_s|^2 over a
     grid FIT_SUBDIVISION times finer than the mesh (t_s = normalize(d_s S), what a
     vertex at s would store), only where the lens passes light; and the largest
@@ -234,7 +278,7 @@ def _fit_normals(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, model, g
     U, V = np.meshgrid(np.linspace(u0, 1.0, gx * k + 1), np.linspace(0.0, 1.0, gy * k + 1))
     su, sv = U.ravel(), V.ravel()
     x, y = model.uv_to_image(su, sv)
-    rays = trace_field(lens, film_distance_mm, film, plane_z_mm, pupil_xy_mm, x, y)
+    rays = ray_field(x, y)
     use = rays.passed
     if not use.any():
         return normal0, 0.0

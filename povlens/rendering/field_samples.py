@@ -22,8 +22,9 @@ import numpy as np
 
 from povlens.errors import PovlensError
 from povlens.plan.schema import Plan
-from povlens.pov.field_mesh import build_field_mesh, mesh2_text, placement_text, uv_model
-from povlens.pupil.field import concentric_disc_mm, field_sample_points, field_weight, trace_field
+from povlens.pov.field_mesh import (build_field_mesh, lens_ray_field, mesh2_text,
+                                    placement_text, uv_model)
+from povlens.pupil.field import concentric_disc_mm, field_sample_points, field_weight
 from povlens.pupil.field_mask import pass_mask
 from povlens.pupil.rays import ScenePlacement
 from povlens.util.files import write_bytes, write_text
@@ -75,15 +76,11 @@ def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path)
     model = uv_model(film.width_px, film.height_px, jitter, plan.povray.version)
     placement = placement_of(plan)
     pixel_angle = film.pixel_pitch_mm / abs(plan.lens.efl_mm)
-    mesh = build_field_mesh(lens, fd, film, table.plane_z_mm, pupil, placement, model,
-                            fm.grid, fm.eps, pixel_angle)
+    field = lens_ray_field(lens, fd, film, table.plane_z_mm, pupil)
+    mesh = build_field_mesh(field, placement, model, fm.grid, fm.eps, pixel_angle)
     xs, ys, margins = mesh.node_margins()
     px, py = model.pixel_positions()
-
-    def trace(x, y):
-        return trace_field(lens, fd, film, table.plane_z_mm, pupil, x, y)
-
-    passed, _ = pass_mask(xs, ys, margins, px, py, trace)
+    passed, _ = pass_mask(xs, ys, margins, px, py, field)
     r0, r1 = plan.rows_of_sample(k)
     passed[:r0] = False
     passed[r1:] = False
