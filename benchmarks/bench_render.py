@@ -1,33 +1,104 @@
-"""Where the time of an N-sample mesh render goes, against focal_blur with N samples.
+"""Mesh renders against POV-Ray's focal_blur at the sizes users render, in one run.
 
-    python benchmarks/bench_render.py [--samples 16] [--width 160 --height 120]
-                                      [--scene scenes/paper.pov] [--lens dgauss.50mm]
+    python benchmarks/bench_render.py [--sizes 640x480,1920x1080] [--samples 16,64]
+        [--scenes paper.pov,chart.pov] [--lens dgauss.50mm] [--equal-time] [--csv OUT.csv]
 
-One run measures, on the same scene and size:
-* the pinhole render (one POV-Ray pass: the trace cost of one sample plus start-up);
-* focal_blur with ``blur_samples N, N`` (the equivalent thin lens);
-* the mesh path (``render_outdir``: one process traces the lens samples and writes
-  their meshes; every sample is its own POV-Ray process) with 2, 4, 8 and 16
-  POV-Ray processes in flight, with its parts: exit-pupil table, rays and mesh
-  files (Python), POV-Ray, composite;
-and prints the ratios.  Results go to stdout; redirect to benchmarks/results/.
+For each bundled scene and size it measures, one run each, on this machine's cores:
+
+* ``pinhole``: the pinhole view (one POV-Ray pass), after ``convert --method focal-blur``;
+* ``focal_blur N``: POV-Ray's focal_blur with ``blur_samples N, N``;
+* ``mesh N``: the exact lens through field ray meshes (``--method mesh``, the default
+  ``--ray-mesh field``), with where its time goes: conversion (of which the grid
+  certification), tracing and writing the meshes and masks (Python), POV-Ray (the
+  processes' summed wall time, and one sample's parse and trace time from POV-Ray's
+  own statistics), compositing; and the peak memory of the whole process tree
+  (povlens and every POV-Ray it runs, summed RSS, polled every 50 ms).
+
+Ratios are ``mesh N / focal_blur N``, render only (render_outdir against render_view)
+and with each method's conversion.  ``--equal-time`` adds, at the first size, the
+error against a converged exact reference (field meshes, 256 samples, another
+seed) of field meshes and of today's per-pixel meshes (``--ray-mesh pixel``) at
+several sample counts, with their times.  Results go to stdout (and ``--csv``);
+``benchmarks/results/render.txt`` keeps the last run.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import os
+import re
 import shutil
+import subprocess
+import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
 from povlens.plan.convert import ConvertOptions, convert
-from povlens.rendering.samples import composite_outdir, lens_for, pupil_table_for, render_outdir, render_view
 from povlens.plan.schema import read_plan
+from povlens.pov.executable import find_povray
+from povlens.rendering.field_samples import write_field_sample
+from povlens.rendering.samples import (composite_outdir, lens_for, pupil_table_for, render_outdir,
+                                       render_view)
+from povlens.util.images import read_image
 
 ROOT = Path(__file__).resolve().parent.parent
+SCENES = ROOT / "povlens" / "data" / "scenes"
+
+
+class PeakMemory:
+    """Peak summed RSS (MB) of this process and all its descendants, polled."""
+
+    def __init__(self, interval_s: float = 0.05):
+        self.interval_s, self.peak_mb = interval_s, 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    @staticmethod
+    def _tree_rss_mb() -> float:
+        parent, rss = {}, {}
+        for d in os.listdir("/proc"):
+            if not d.isdigit():
+                continue
+            try:
+                with open(f"/proc/{d}/stat") as f:
+                    parts = f.read().rsplit(")", 1)[1].split()
+                parent[int(d)] = int(parts[1])
+                rss[int(d)] = int(parts[21]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
+            except (OSError, IndexError, ValueError):
+                pass
+        me, total, todo = os.getpid(), 0.0, [os.getpid()]
+        children = {}
+        for pid, pp in parent.items():
+            children.setdefault(pp, []).append(pid)
+        seen = set()
+        while todo:
+            pid = todo.pop()
+            if pid in seen:
+                continue
+            seen.add(pid)
+            total += rss.get(pid, 0.0)
+            todo += children.get(pid, [])
+        del me
+        return total
+
+    def _run(self):
+        while not self._stop.is_set():
+            self.peak_mb = max(self.peak_mb, self._tree_rss_mb())
+            time.sleep(self.interval_s)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
 
 
 def timed(fn, *a, **kw):
@@ -36,55 +107,147 @@ def timed(fn, *a, **kw):
     return time.perf_counter() - t0, out
 
 
+def sample_parse_and_trace_s(outdir: Path) -> tuple[float, float]:
+    """POV-Ray's own parse and trace time (s) of lens sample 0, rendered again with
+    statistics on, one thread."""
+    plan = read_plan(outdir)
+    lens = lens_for(plan)
+    table = pupil_table_for(outdir, plan, lens)
+    s = outdir / "samples"
+    inc = s / "sample_0000.inc"
+    write_field_sample(plan, lens, table, outdir, 0, inc)
+    pv = plan.povray
+    cmd = [find_povray(), "+Ibatch_000.pov", "+O/dev/null", "-F", f"+W{pv.render_width}",
+           f"+H{pv.render_height}", "Declare=PovlensFrame=0", "-D", "+WT1", "-A",
+           f"+L{Path(plan.inputs.scene).parent}"]
+    out = subprocess.run(cmd, cwd=s, capture_output=True, text=True).stderr
+    inc.unlink(missing_ok=True)
+
+    def seconds(label):
+        m = re.search(label + r" Time:.*?\(([\d.]+) seconds\)", out)
+        return float(m.group(1)) if m else float("nan")
+
+    return seconds("Parse"), seconds("Trace")
+
+
+def mesh_row(work: Path, base: dict, n: int, jobs: int, ray_mesh: str = "field",
+             seed: int = 0) -> dict:
+    d = work / f"mesh-{ray_mesh}-{n}-{seed}"
+    with PeakMemory() as mem:
+        t_conv, _ = timed(convert, ConvertOptions(outdir=str(d), method="mesh", samples=n,
+                                                  ray_mesh=ray_mesh, seed=seed, **base))
+        t_render, _ = timed(render_outdir, d, jobs=jobs, quiet=True)
+    plan = read_plan(d)
+    t_comp, _ = timed(composite_outdir, d, write=False)
+    timing = json.loads((d / "samples" / "render.timing.json").read_text())
+    row = {"n": n, "ray_mesh": ray_mesh, "convert_s": t_conv, "render_s": t_render,
+           "rays_meshes_s": timing["rays_and_meshes_s"], "povray_summed_s": timing["povray_s"],
+           "composite_s": t_comp, "peak_mb": mem.peak_mb, "blocked": timing["blocked"],
+           "outdir": d}
+    if plan.field_mesh is not None:
+        fm = plan.field_mesh
+        row.update(grid=f"{fm.grid[0]}x{fm.grid[1]}", eps=fm.eps,
+                   max_ray_error_px=fm.max_ray_error_px)
+        row["parse_s"], row["trace_s"] = sample_parse_and_trace_s(d)
+    return row
+
+
+def bench_size(scene: Path, lens: str, width: int, height: int, ns: list[int], jobs: int,
+               work: Path) -> list[dict]:
+    base = dict(scene=str(scene), lens=lens, focus=4.0, width=width, height=height)
+    rows = []
+    views = work / f"views-{scene.stem}-{width}"
+    t_conv_fb, _ = timed(convert, ConvertOptions(outdir=str(views), method="focal-blur",
+                                                 samples=ns[0], **base))
+    t_pin, _ = timed(render_view, views, "pinhole")
+    print(f"\n{scene.name}, {lens}, {width}x{height}, {jobs} cores")
+    print(f"  pinhole                 {t_pin:8.2f} s")
+    for n in ns:
+        d = work / f"fb-{scene.stem}-{width}-{n}"
+        t_c, _ = timed(convert, ConvertOptions(outdir=str(d), method="focal-blur", samples=n,
+                                               **base))
+        with PeakMemory() as mem:
+            t_fb, _ = timed(render_view, d, "focal-blur")
+        m = mesh_row(work / f"{scene.stem}-{width}", base, n, jobs)
+        m.update(scene=scene.name, size=f"{width}x{height}", pinhole_s=t_pin, focal_blur_s=t_fb,
+                 focal_blur_convert_s=t_c, focal_blur_peak_mb=mem.peak_mb)
+        m["ratio_render"] = m["render_s"] / t_fb
+        m["ratio_with_convert"] = (m["render_s"] + m["convert_s"]) / (t_fb + t_c)
+        rows.append(m)
+        print(f"  focal_blur {n:3d}          {t_fb:8.2f} s (+ convert {t_c:.2f} s, peak "
+              f"{mem.peak_mb:.0f} MB)")
+        print(f"  mesh {n:3d}                {m['render_s']:8.2f} s (+ convert {m['convert_s']:.2f} s)"
+              f"  = {m['ratio_render']:.2f}x focal_blur ({m['ratio_with_convert']:.2f}x with "
+              f"conversion); grid {m.get('grid')} eps {m.get('eps')}, max ray error "
+              f"{m.get('max_ray_error_px', float('nan')):.3f} px")
+        print(f"      where it goes: tracing+meshes+masks {m['rays_meshes_s']:.2f} s (Python), "
+              f"POV-Ray {m['povray_summed_s']:.2f} s summed over processes; one sample: parse "
+              f"{m.get('parse_s', float('nan')):.3f} s, trace {m.get('trace_s', float('nan')):.3f} s;"
+              f" composite {m['composite_s']:.2f} s; {m['blocked']} samples all blocked; peak "
+              f"{m['peak_mb']:.0f} MB")
+        _drop_samples(m.pop("outdir"))
+    return rows
+
+
+def _drop_samples(d: Path) -> None:
+    shutil.rmtree(d / "samples", ignore_errors=True)
+
+
+def equal_time(scene: Path, lens: str, width: int, height: int, jobs: int, work: Path) -> list:
+    """Error against a converged exact reference, and time, of field and per-pixel meshes."""
+    base = dict(scene=str(scene), lens=lens, focus=4.0, width=width, height=height)
+    ref_row = mesh_row(work / "eq", base, 256, jobs, seed=1000)
+    ref = composite_outdir(ref_row["outdir"], write=False)
+    out = []
+    print(f"\nerror at equal time, {scene.name}, {lens}, {width}x{height}: reference = field "
+          f"meshes, 256 samples, seed 1000 ({ref_row['render_s']:.1f} s)")
+    for kind, ns in (("field", (8, 16, 32, 64)), ("pixel", (4, 8, 16))):
+        for n in ns:
+            r = mesh_row(work / "eq", base, n, jobs, ray_mesh=kind)
+            img = composite_outdir(r["outdir"], write=False)
+            rmse = float(np.sqrt(np.mean((img - ref) ** 2)))
+            t = r["render_s"] + r["convert_s"]
+            out.append({"ray_mesh": kind, "n": n, "time_s": t, "rmse": rmse})
+            print(f"  {kind:5s} meshes, {n:3d} samples: {t:7.2f} s (convert + render), RMSE "
+                  f"{rmse:.5f}")
+            _drop_samples(r["outdir"])
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", default=str(ROOT / "scenes" / "paper.pov"))
+    ap.add_argument("--scenes", default="paper.pov,chart.pov")
     ap.add_argument("--lens", default="dgauss.50mm")
-    ap.add_argument("--focus", type=float, default=4.0)
-    ap.add_argument("--samples", type=int, default=16)
-    ap.add_argument("--width", type=int, default=160)
-    ap.add_argument("--height", type=int, default=120)
-    ap.add_argument("--in-flight", default="2,4,8,16")
+    ap.add_argument("--sizes", default="640x480,1920x1080")
+    ap.add_argument("--samples", default="16,64")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--equal-time", action="store_true")
+    ap.add_argument("--csv", type=Path)
     args = ap.parse_args(argv)
-    base = dict(scene=args.scene, lens=args.lens, focus=args.focus, width=args.width,
-                height=args.height, samples=args.samples)
-    tmp = Path(tempfile.mkdtemp(prefix="povlens-bench-"))
+    ns = [int(n) for n in args.samples.split(",")]
+    sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
+    work = Path(tempfile.mkdtemp(prefix="povlens-bench-render-"))
     rows = []
     try:
-        d = tmp / "views"
-        convert(ConvertOptions(outdir=str(d), method="focal-blur", **base))
-        t_pin, _ = timed(render_view, d, "pinhole")
-        t_fb, _ = timed(render_view, d, "focal-blur")
-        print(f"scene {args.scene}, lens {args.lens}, {args.width}x{args.height}, "
-              f"N = {args.samples} samples, {args.jobs} jobs")
-        print(f"pinhole (1 pass)                     {t_pin:8.2f} s")
-        print(f"focal_blur blur_samples N,N          {t_fb:8.2f} s")
-        for bs in [int(b) for b in args.in_flight.split(",")]:
-            d = tmp / f"mesh{bs}"
-            t_conv, _ = timed(convert, ConvertOptions(outdir=str(d), method="mesh", **base))
-            plan = read_plan(d)
-            t_table, _ = timed(pupil_table_for, d, plan, lens_for(plan))
-            t_render, _ = timed(render_outdir, d, jobs=args.jobs, quiet=True, in_flight=bs)
-            t_comp, _ = timed(composite_outdir, d)
-            parts = [json.loads(p.read_text()) for p in (d / "samples").glob("*.timing.json")]
-            rays = sum(p["rays_and_meshes_s"] for p in parts)
-            pov = sum(p["povray_s"] for p in parts)
-            total = t_conv + t_table + t_render
-            rows.append((bs, total))
-            print(f"mesh, {bs:2d} POV-Ray in flight: total {total:7.2f} s = convert {t_conv:.2f} "
-                  f"+ pupil table {t_table:.2f} + render {t_render:.2f} (of which "
-                  f"rays+meshes {rays:.2f}, POV-Ray processes {pov:.2f} summed; composite "
-                  f"{t_comp:.2f}); "
-                  f"{total / t_fb:.1f}x focal_blur, {total / (args.samples * t_pin):.2f}x "
-                  f"N pinhole passes")
-        best = min(rows, key=lambda r: r[1])
-        print(f"best mesh setting: {best[0]} POV-Ray processes in flight, "
-              f"{best[1]:.2f} s = "
-              f"{best[1] / t_fb:.1f}x focal_blur with the same N")
+        for name in args.scenes.split(","):
+            for w, h in sizes:
+                rows += bench_size(SCENES / name, args.lens, w, h, ns, args.jobs, work)
+        if args.equal_time:
+            equal_time(SCENES / args.scenes.split(",")[0], args.lens, *sizes[0], args.jobs, work)
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(work, ignore_errors=True)
+    print("\nsummary: mesh N / focal_blur N (render only; with conversion)")
+    for r in rows:
+        print(f"  {r['scene']:10s} {r['size']:10s} N={r['n']:3d}: {r['ratio_render']:.2f}x; "
+              f"{r['ratio_with_convert']:.2f}x; peak {r['peak_mb']:.0f} MB")
+    if args.csv:
+        keys = sorted({k for r in rows for k in r})
+        with open(args.csv, "w", newline="") as f:
+            wr = csv.DictWriter(f, fieldnames=keys)
+            wr.writeheader()
+            wr.writerows(rows)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
