@@ -9,38 +9,31 @@ writes EXR as half floats; OpenImageIO's own ``add`` keeps its input's format).
 from __future__ import annotations
 
 import os
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
 from povlens.errors import PovlensError
 from povlens.util.images import read_image
 
-__all__ = ["composite"]
+__all__ = ["composite", "accumulate_samples"]
 
 
-def composite(
+def accumulate_samples(
     sample_paths: Sequence[str | os.PathLike],
-    weight_arrays: Sequence[np.ndarray] | None = None,
+    weight_arrays: Iterable[np.ndarray] | None = None,
     drop_top_rows: int = 0,
     drop_right_columns: int = 0,
-) -> np.ndarray:
-    """Average sample images, returning float32 ``(H, W, C)`` linear light.
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The sums of a composite, one sample in memory at a time.
 
-    sample_paths : image files (K of them), all the same size ``(H + drop_top_rows, W)``
-        and channel count.
-    weight_arrays : None for the plain mean ``sum_k I_k / K``; otherwise K arrays of
-        shape ``(H, W)`` (after dropping rows) giving per-pixel weights ``w_k >= 0``,
-        and the result is ``sum_k w_k I_k / sum_k w_k``.  Pixels whose total weight is
-        0 come out as 0 (never NaN).
-    drop_top_rows : rows removed from the top of every image first (1 for the
-        POV-Ray 3.7.0.x mesh_camera row workaround, see
-        :func:`povlens.pov.mesh.render_size`).
-    drop_right_columns : columns removed from the right of every image first (1 for
-        field meshes, :func:`povlens.pov.field_mesh.uv_model`).
+    Parameters are those of :func:`composite`; ``weight_arrays`` may be any iterable
+    (a generator computing each sample's weights when it is reached).
 
-    Raises :class:`PovlensError` naming the offending file for unreadable
-    images, mismatched sizes or bad weights.
+    Returns
+    -------
+    total : (H, W, C) float64, ``sum_k w_k I_k`` (or ``sum_k I_k`` without weights).
+    weight_sum : (H, W) float64 ``sum_k w_k``, or None without weights.
     """
     paths = list(sample_paths)
     if not paths:
@@ -49,17 +42,8 @@ def composite(
     if drop < 0 or right < 0:
         raise PovlensError(f"drop_top_rows and drop_right_columns must be >= 0, got "
                            f"{drop_top_rows} and {drop_right_columns}")
-    weights = None
-    if weight_arrays is not None:
-        weights = list(weight_arrays)
-        if len(weights) != len(paths):
-            raise PovlensError(
-                f"composite: {len(paths)} sample images but {len(weights)} weight arrays"
-            )
-
-    total = None
-    wsum = None
-    shape = None
+    weights = None if weight_arrays is None else iter(weight_arrays)
+    total = wsum = shape = None
     for k, p in enumerate(paths):
         img = read_image(p)
         if img.shape[0] <= drop:
@@ -84,7 +68,11 @@ def composite(
         if weights is None:
             total += img
             continue
-        w = np.asarray(weights[k], dtype=np.float64)
+        w = next(weights, None)
+        if w is None:
+            raise PovlensError(f"composite: {len(paths)} sample images but only {k} weight "
+                               f"arrays")
+        w = np.asarray(w, dtype=np.float64)
         if w.shape != shape[:2]:
             raise PovlensError(
                 f"weight array {k} (for {p}) has shape {w.shape}, expected {shape[:2]}"
@@ -93,8 +81,37 @@ def composite(
             raise PovlensError(f"weight array {k} (for {p}) has negative or non-finite values")
         total += w[:, :, None] * img
         wsum += w
+    if weights is not None and next(weights, None) is not None:
+        raise PovlensError(f"composite: {len(paths)} sample images but more weight arrays")
+    return total, wsum
 
-    if weights is None:
+
+def composite(
+    sample_paths: Sequence[str | os.PathLike],
+    weight_arrays: Iterable[np.ndarray] | None = None,
+    drop_top_rows: int = 0,
+    drop_right_columns: int = 0,
+) -> np.ndarray:
+    """Average sample images, returning float32 ``(H, W, C)`` linear light.
+
+    sample_paths : image files (K of them), all the same size ``(H + drop_top_rows, W)``
+        and channel count.
+    weight_arrays : None for the plain mean ``sum_k I_k / K``; otherwise K arrays of
+        shape ``(H, W)`` (after dropping rows) giving per-pixel weights ``w_k >= 0``,
+        and the result is ``sum_k w_k I_k / sum_k w_k``.  Pixels whose total weight is
+        0 come out as 0 (never NaN).
+    drop_top_rows : rows removed from the top of every image first (1 for the
+        POV-Ray 3.7.0.x mesh_camera row workaround, see
+        :func:`povlens.pov.mesh.render_size`).
+    drop_right_columns : columns removed from the right of every image first (1 for
+        field meshes, :func:`povlens.pov.field_mesh.uv_model`).
+
+    Raises :class:`PovlensError` naming the offending file for unreadable
+    images, mismatched sizes or bad weights.
+    """
+    paths = list(sample_paths)
+    total, wsum = accumulate_samples(paths, weight_arrays, drop_top_rows, drop_right_columns)
+    if wsum is None:
         out = total / len(paths)
     else:
         out = np.zeros_like(total)

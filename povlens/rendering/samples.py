@@ -55,7 +55,7 @@ from povlens.plan.options import povray_options_of
 from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pupil.sampling import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
-from povlens.rendering.composite import composite
+from povlens.rendering.composite import accumulate_samples
 from povlens.util.images import read_image, write_exr, write_png_srgb
 from povlens.pupil.rays import sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
@@ -486,15 +486,15 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
         image = np.zeros((film.height_px, film.width_px, 3))
     else:
         paths = [_sample_paths(outdir, k)[0] for k in rendered]
-        weights = [sample_weight(outdir, k, plan, table) for k in rendered]
-        # sum w I / sum w, in float64 (composite.py); times sum w / N_p for the measurement
-        image = composite(paths, weights, drop_top_rows=drop,
-                          drop_right_columns=plan.povray.drop_right_columns
-                          )[..., :3].astype(np.float64)
+        # sum w I / sum w, in float64, one sample in memory at a time (composite.py);
+        # times sum w / N_p for the measurement
+        total, wsum = accumulate_samples(
+            paths, (sample_weight(outdir, k, plan, table) for k in rendered),
+            drop_top_rows=drop, drop_right_columns=plan.povray.drop_right_columns)
+        image = np.zeros(total.shape[:2] + (3,))
+        nz = wsum > 0
+        image[nz] = total[nz][:, :3] / wsum[nz][:, None]
         if vignetting:
-            wsum = np.zeros(image.shape[:2])
-            for w in weights:
-                wsum += w
             image *= (wsum * exposure / n_p[:, None])[..., None]
     if write:
         _finish_image(outdir, image.astype(np.float32))
