@@ -11,7 +11,8 @@ again; the medians are reported beside the fastest):
   vignetting kept (the plan default);
 * **auto**: ``--method auto`` (depth probe, decision, then the chosen render);
 * the **fixed methods**: ``pinhole``; ``focal-blur`` with ``blur_samples N, N``
-  and ``mesh`` with N lens samples, for each N of a sweep.
+  and ``mesh`` with N lens samples, for each N of a sweep (the views with the
+  lens's vignetting applied as a map, as ``povlens render`` gives them).
 
 Every image is scored by its RMSE against the reference (linear light, all
 pixels and channels), corrected for the reference's own noise: the reference is
@@ -313,9 +314,12 @@ def summarize(rows: list[AutoRow], details: dict, s: AutoBenchSettings, total_s:
                              num.get("min_relative_illumination", math.nan)))
             if "image_vignetting_rmse" in num:
                 lines.append("      (the decision compares half the blur size and shape errors "
-                             "with the tolerance); vignetting's image RMSE {:.3g} against "
+                             "with the tolerance); vignetting (applied as a map) image RMSE "
+                             "{:.3g}, what the map cannot carry (cat's eye) {:.3g}, against "
                              "{:.3g} for a tolerance move".format(
-                                 num["image_vignetting_rmse"], num["image_shift_rmse"]))
+                                 num["image_vignetting_rmse"],
+                                 num.get("image_catseye_rmse", math.nan),
+                                 num["image_shift_rmse"]))
         if info.get("adaptive"):
             a = info["adaptive"]
             lines.append(f"      adaptive: {a.pixel_samples} pixel-samples instead of "

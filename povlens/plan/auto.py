@@ -31,11 +31,12 @@ import numpy as np
 
 from povlens.lens.film import Film
 from povlens.plan.adaptive import adaptive_rows
-from povlens.plan.decision import decide, model_depths, probe_image_error
+from povlens.plan.decision import decide, model_depths, probe_image_error, pupil_cut
 from povlens.plan.depth_probe import DepthProbe, ProbeView, axial_depth, depth_limits, start_probe
-from povlens.plan.fixed import start_plan
+from povlens.plan.fixed import run_in_background, start_plan
 from povlens.plan.options import povray_options_of
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
+from povlens.pupil.illumination import illumination_profile, profile_record
 from povlens.pupil.storage import cached_pupil_table
 from povlens.thinlens.model_error import measure_model_error
 
@@ -142,6 +143,9 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     except BaseException:
         probe.cancel()
         raise
+    # the vignetting map the views get, and the pupil's cut: traced in a thread while
+    # the probe finishes and the model error is measured
+    profile_of = run_in_background(lambda: illumination_profile(table, film.half_diagonal_mm))
     axial = probe_axial_mm(probe)
     near_d, far_d, info = measure_depth_range(opts, film, axial_mm=axial)
     if math.isinf(near_d):  # nothing but background: everything at infinity
@@ -151,13 +155,19 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     near_z, far_z = c + near_d, c + far_d
     err = measure_model_error(lens, fd, model, film, model_depths(model, near_z, far_z),
                               pupil_table=table)
+    profile = profile_of()
     image_error = None
     if probe.image is not None:
-        image_error = probe_image_error(probe.image, film, err, opts.tolerance_px)
+        image_error = probe_image_error(probe.image, film, err, opts.tolerance_px,
+                                        profile=profile, table=table, model=model,
+                                        axial_mm=axial)
     d = decide(near_z_mm=near_z, far_z_mm=far_z, model=model, model_error=err,
                pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.tolerance_px,
-               vignetting=opts.vignetting, image_error=image_error)
+               vignetting=opts.vignetting, image_error=image_error,
+               catseye=pupil_cut(profile))
     d.numbers["depth_probe"] = info
+    if opts.vignetting:     # the render of a view applies this profile (rendering/vignetting)
+        d.numbers["illumination_profile"] = profile_record(profile, table)
     if info["no_depth_pixels"]:
         d.add_remark(f"{info['no_depth_pixels']} of the probe's {info['probe_pixels']} pixels "
                      f"hit surfaces without a measurable response to light (black, emissive, "

@@ -9,7 +9,9 @@
 3. the scene camera's ``focal_point`` when it has focal blur (``aperture`` > 0): the
    distance POV-Ray focuses at, |focal_point - location| (``"focal_point"``);
 4. the distance to ``look_at`` (the scene camera's, or ``--look-at``'s): ``"look_at"``;
-5. what the depth probe sees at the centre of the frame: ``"depth probe at centre"``.
+5. what the depth probe sees at the centre of the frame: ``"depth probe at centre"``;
+   for method pinhole, which has no blur to focus, no probe runs: the lens is focused
+   at a typical 5 m (:data:`PINHOLE_FOCUS_FROM`; the plan's note says so).
 
 The probe (:mod:`povlens.plan.depth_probe`) renders only a :data:`WINDOW` x
 :data:`WINDOW` window of output pixels around the point, as a camera of its own whose
@@ -45,7 +47,8 @@ from povlens.plan.options import ConvertOptions
 from povlens.plan.schema import PovrayCamera
 
 __all__ = ["WINDOW", "SAME_SURFACE", "SHIFT_PX", "MAX_ROUNDS", "FADE_RANGE", "resolve_focus",
-           "focus_point", "window_camera", "pixel_shift_px", "measure_focus"]
+           "focus_point", "window_camera", "pixel_shift_px", "measure_focus",
+           "PINHOLE_FOCUS_FROM", "pinhole_focus_note"]
 
 #: Output pixels on a side of the probed window (odd: the point is its central pixel).
 WINDOW = 5
@@ -60,6 +63,10 @@ MAX_ROUNDS = 4
 FADE_RANGE = (0.05, 100.0)
 #: The first round's focus (mm) when the camera gives none: a typical distance.
 _FIRST_FOCUS_MM = 5000.0
+#: ``focus_from`` of a pinhole plan whose camera gives no focus: no probe measures one
+#: (a pinhole render has no blur); the lens is focused at the typical distance, which
+#: sets only the field of view (focus breathing).  :func:`pinhole_focus_note` says so.
+PINHOLE_FOCUS_FROM = "default distance (method pinhole: no depth probe)"
 
 
 def focus_point(opts: ConvertOptions) -> tuple[float, float, str]:
@@ -241,13 +248,27 @@ def _mm_per_unit(opts: ConvertOptions) -> float:
     return UNITS_MM[opts.units]
 
 
+def pinhole_focus_note(opts: ConvertOptions) -> str | None:
+    """The plan's note when :func:`resolve_focus` gave a pinhole plan the default
+    focus (``focus_from`` :data:`PINHOLE_FOCUS_FROM`), else None."""
+    if opts.focus_from != PINHOLE_FOCUS_FROM:
+        return None
+    return (f"the camera gives no focus (no focal_point with focal blur, no look_at) and "
+            f"method pinhole needs none: no depth probe ran and the lens is focused at "
+            f"focus={opts.focus:g} ({_FIRST_FOCUS_MM / 1000:g} m), which sets only the "
+            f"field of view (it changes a little with the focus); give 'focus' for the "
+            f"framing at another distance")
+
+
 def resolve_focus(opts: ConvertOptions) -> tuple[ConvertOptions, dict | None]:
     """``opts`` with ``focus`` and ``focus_from`` set (the module docstring's order).
 
     Returns
     -------
     (ConvertOptions, dict or None)
-        The options, and the focus probe's numbers (None when no probe ran).
+        The options, and the focus probe's numbers (None when no probe ran).  A pinhole
+        plan runs no probe for step 5: it is focused at the typical distance
+        (:data:`PINHOLE_FOCUS_FROM`, :func:`pinhole_focus_note`).
 
     Raises :class:`ParameterError` for ``focus`` with ``focus_at``, a pixel outside the
     image, or a point the probe finds no depth at.
@@ -261,5 +282,8 @@ def resolve_focus(opts: ConvertOptions) -> tuple[ConvertOptions, dict | None]:
         got = camera_focus(opts)
         if got is not None:
             return dataclasses.replace(opts, focus=got[0], focus_from=got[1]), None
+        if opts.method == "pinhole":       # no blur to focus: no depth probe either
+            return dataclasses.replace(opts, focus=_FIRST_FOCUS_MM / _mm_per_unit(opts),
+                                       focus_from=PINHOLE_FOCUS_FROM), None
     focus, label, info = measure_focus(opts)
     return dataclasses.replace(opts, focus=focus, focus_from=label), info

@@ -22,7 +22,7 @@ from povlens.errors import ParameterError
 from povlens.plan import speculative
 from povlens.plan.adaptive import adaptive_rows, apply_to_plan, limit_samples, real_blur_model_error
 from povlens.plan.auto import choose_method, measure_depth_map, start_depth_probe
-from povlens.plan.autofocus import resolve_focus
+from povlens.plan.autofocus import pinhole_focus_note, resolve_focus
 from povlens.plan.depth_probe import atmosphere_note, depth_limits, probe_record
 from povlens.plan.fixed import (PlanStart, finish_plan, make_plan, make_plan_with_lens,
                                 run_in_background, start_plan)
@@ -207,6 +207,7 @@ def convert(opts: ConvertOptions, render_early=None) -> Plan:
             plan.depth_probe = probe_record(range_info, focus_info)
             # the probe's blind spot: the scene's own fog and media
             plan.add_note(atmosphere_note(opts.scene, opts.library_paths))
+        plan.add_note(pinhole_focus_note(opts))           # pinhole: no probe for the focus
         if choice is not None:
             req = choice.requested
             plan.record_auto_choice(choice.decision, req.tolerance_px, req.auto_samples)

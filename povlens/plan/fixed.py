@@ -54,9 +54,10 @@ __all__ = ["PlanStart", "start_plan", "finish_plan", "make_plan", "make_plan_wit
            "run_in_background", "MESH_ANTIALIAS_NOTE", "PINHOLE_NOTE"]
 
 #: The note of a pinhole plan, which skips what only the lens's blur needs
-#: (:func:`finish_plan`); ``model_error`` is then empty.
-PINHOLE_NOTE = ("method pinhole: no thin-lens model error or exit-pupil table was computed "
-                "(a pinhole render needs neither; plan.json's model_error is empty)")
+#: (:func:`finish_plan`): ``model_error`` is empty, and the plan builds no exit-pupil
+#: table (the render builds it if the vignetting map wants it).
+PINHOLE_NOTE = ("method pinhole: the thin-lens model's error was not measured (a pinhole "
+                "view needs none; plan.json's model_error is empty)")
 
 #: The note of a mesh plan whose ``povray_options`` turn anti-aliasing on.
 MESH_ANTIALIAS_NOTE = (
@@ -442,7 +443,7 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_
         The plan and the exit-pupil table it used (None: a pinhole plan's).
     """
     lens, p, film, model = st.lens, st.paraxial, st.film, st.thin_lens
-    # pupil.rays loads scipy.stats (~0.4 s): not before the inputs are validated
+    # imported here, once the inputs are validated (its scipy.stats loads only with points)
     from povlens.pupil.rays import ScenePlacement
     placement = ScenePlacement.at_entrance_pupil(st.location, st.right, st.up, st.forward,
                                                  model.centre_z_mm, st.mm_per_unit)

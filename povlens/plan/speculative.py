@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from povlens.plan.decision import (FOCAL_BLUR_ADAPTIVE, MIN_SAMPLES, STRONG_VIGNETTING,
-                                   VIGNETTING_TOLERANCE, samples_for_blur, shape_error_px)
+                                   shape_error_px)
 from povlens.plan.fixed import PlanStart, finish_plan
 from povlens.plan.options import ConvertOptions, povray_options_of
 from povlens.plan.render_folder import focal_blur_text, write_folder
@@ -50,33 +50,32 @@ def lens_rules_out_views(opts: ConvertOptions, plan0: Plan) -> bool:
     True when, at the plan's standard depths (half, once, twice and ten times the
     focus distance), the distortion, half the blur-size error or half the shape
     error (the measures of :func:`povlens.plan.decision.decide`) is over the
-    budget ``opts.tolerance_px``, or the vignetting is wanted and strong (relative
-    illumination below :data:`~povlens.plan.decision.STRONG_VIGNETTING` somewhere
-    in the frame).
+    budget ``opts.tolerance_px``.  The vignetting does not count: the views get it
+    as a map (:mod:`povlens.rendering.vignetting`), and what the map cannot carry
+    depends on the scene's defocus (:func:`vignetting_may_choose_mesh`).
     """
     e = plan0.model_error
     tol = opts.tolerance_px
     shape = shape_error_px(np.asarray(e["blur_real_px"]), np.asarray(e["elongation"]))
-    illum = e["min_relative_illumination"]
-    return bool((opts.vignetting and illum < STRONG_VIGNETTING)
-                or e["max_distortion_px"] >= tol or e["max_blur_size_error_px"] / 2 >= tol
+    return bool(e["max_distortion_px"] >= tol or e["max_blur_size_error_px"] / 2 >= tol
                 or float(np.max(shape)) / 2 >= tol)
 
 
 def vignetting_may_choose_mesh(opts: ConvertOptions, plan0: Plan) -> bool:
-    """Whether the vignetting may make ``--method auto`` prefer mesh to the views.
+    """Whether the cat's eye may make ``--method auto`` prefer mesh to the views.
 
-    True when the vignetting is wanted and visible (relative illumination below
-    ``1 - VIGNETTING_TOLERANCE``) and the largest blur at the plan's standard
-    depths needs only the minimum mesh sample count: the case where
-    :func:`povlens.plan.decision.decide` prefers mesh when the vignetting takes
-    :data:`~povlens.plan.decision.VIGNETTING_FLOOR_SHARE` of the budget.
+    True when the vignetting is wanted and strong (relative illumination below
+    :data:`~povlens.plan.decision.STRONG_VIGNETTING` somewhere in the frame: the
+    rims cut much of the pupil) and half the largest thin-lens blur at the plan's
+    standard depths reaches the budget: whether the cat's eye of out-of-focus light
+    is beyond it then depends on where the scene is out of focus, which the depth
+    probe tells (:func:`povlens.plan.decision.catseye_rmse`).
     """
     e = plan0.model_error
     illum = e["min_relative_illumination"]
-    blur = max(float(np.max(e["blur_real_px"])), float(np.max(e["blur_model_px"])))
-    return bool(opts.vignetting and illum < 1.0 - VIGNETTING_TOLERANCE
-                and samples_for_blur(blur) == MIN_SAMPLES)
+    blur = float(np.max(e["blur_model_px"])) if np.size(e["blur_model_px"]) else 0.0
+    return bool(opts.vignetting and illum < STRONG_VIGNETTING
+                and 0.5 * blur >= opts.tolerance_px)
 
 
 def early_guess(opts: ConvertOptions, plan0: Plan) -> str:
@@ -87,12 +86,11 @@ def early_guess(opts: ConvertOptions, plan0: Plan) -> str:
     str
         * ``"mesh"``: the lens alone rules out the views (:func:`lens_rules_out_views`):
           the first lens samples of the mesh render;
-        * ``"either"``: the thin lens may do, but the vignetting is wanted and visible
-          while the blur needs only the minimum mesh sample count
-          (:func:`vignetting_may_choose_mesh`): whether the decision takes mesh
-          depends on the scene's image, so both start: the first lens samples, and
-          the adaptive focal_blur view at low priority, which takes the CPU the
-          samples leave;
+        * ``"either"``: the thin lens may do, but the lens vignettes strongly and
+          blurs enough for its cat's eye to matter (:func:`vignetting_may_choose_mesh`):
+          whether the decision takes mesh depends on the scene's depths, so both
+          start: the first lens samples, and the adaptive focal_blur view at low
+          priority, which takes the CPU the samples leave;
         * ``"views"``: otherwise, the adaptive focal_blur view (low priority).
     """
     if lens_rules_out_views(opts, plan0):
@@ -180,7 +178,8 @@ def start_early_samples(opts: ConvertOptions, start: PlanStart, reuse: dict, tab
     plan = finish_plan(eopts, start, **reuse)[0]
     plan.record_auto_choice(Decision(
         "mesh", n, ["provisional: the lens alone rules out the pinhole and focal_blur views "
-                    "(vignetting or distortion); the depth probe decides the sample count"],
+                    "(distortion, blur size or shape), or its cat's eye may; the depth "
+                    "probe decides"],
         provisional=True), opts.tolerance_px, opts.auto_samples)
     write_folder(Path(opts.outdir), plan)
     return EarlySamples(plan, render_early(plan, start.lens, table))

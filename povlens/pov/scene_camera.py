@@ -61,8 +61,10 @@ along ``D + x0 R + y0 U`` with ``x0 = (i + 0.5)/W - 0.5``, ``y0 = 0.5 -
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 import os
+import threading
 from pathlib import Path
 from typing import Iterable, Mapping
 
@@ -171,6 +173,8 @@ def parse_scene_camera(
     -------
     SceneCamera
         World coordinates, scene units; ``replaced`` says what the lens replaces.
+        Remembered in this process for the same arguments while the scene, the files
+        it includes and their folders are unchanged (a copy each call).
 
     Raises
     ------
@@ -181,15 +185,65 @@ def parse_scene_camera(
     """
     path = Path(path)
     libs = [*(default_library_paths() if povray_library else []), *map(Path, library_paths)]
+    key = (str(path.absolute()), image_width, image_height, tuple(str(p.absolute()) for p in libs),
+           clock, tuple(sorted((declares or {}).items())))
+    with _READ_LOCK:
+        known = _READ.get(key)
+    if known is not None and _stamps(known[0]) == known[1]:
+        return _copy(known[2])
     cam, notes = _read_camera(path, image_width, image_height, libs, clock, declares)
     if clock is None and "clock" in notes.pop("used", ()):
         moved = _moves_with_clock(path, image_width, image_height, libs, declares, cam)
         if moved:
             notes.setdefault("replaced", []).append(moved)
+    files = notes.get("files")
     if cam is None:
         cam = CameraState(where=f"{path} (default camera)")
     extra = list(notes.get("replaced", []))
-    return dataclasses.replace(_world_camera(cam), replaced=extra + _notes(cam, image_width, image_height))
+    found = dataclasses.replace(_world_camera(cam),
+                                replaced=extra + _notes(cam, image_width, image_height))
+    if files is not None:
+        # the folders too: a file added there may shadow an include found elsewhere
+        watched = [*files, path.parent, *libs]
+        stamps = _stamps(watched)
+        if stamps is not None:
+            with _READ_LOCK:
+                while len(_READ) >= _READ_LIMIT:
+                    _READ.pop(next(iter(_READ)))
+                _READ[key] = (watched, stamps, found)
+    return _copy(found)
+
+
+#: Cameras read in this process: key -> (files and folders read, their stamps, camera).
+#: A conversion reads the scene's camera twice (for its focus, then for its plan), and
+#: a big scene's include files take a while to walk (docs/decisions/cli.md, issue 14).
+_READ: dict = {}
+_READ_LIMIT = 32
+_READ_LOCK = threading.Lock()         # conversions may run in threads (API callers)
+
+
+def _stamps(paths) -> tuple | None:
+    """A file's content hash, a folder's (modification time, inode), for each path;
+    None if one cannot be read.  Contents, not times: a file rewritten within the
+    clock's granularity (milliseconds) keeps its modification time."""
+    out = []
+    try:
+        for p in paths:
+            if os.path.isdir(p):
+                st = os.stat(p)
+                out.append((st.st_mtime_ns, st.st_ino))
+            else:
+                out.append(hashlib.blake2b(Path(p).read_bytes(), digest_size=16).digest())
+    except OSError:
+        return None
+    return tuple(out)
+
+
+def _copy(cam: SceneCamera) -> SceneCamera:
+    """A copy of ``cam`` whose arrays and notes the caller may change."""
+    return dataclasses.replace(cam, **{f.name: getattr(cam, f.name).copy()
+                                       for f in dataclasses.fields(cam)
+                                       if isinstance(getattr(cam, f.name), (np.ndarray, list))})
 
 
 def _read_camera(path: Path, image_width, image_height, libs, clock, declares
@@ -201,7 +255,9 @@ def _read_camera(path: Path, image_width, image_height, libs, clock, declares
     reader = SceneReader(path, still_constants(clock, image_width, image_height), libs, declares)
     reader.run()
     cam = reader.camera
-    notes: dict = {"used": set(reader.stream.used_names)}
+    # the files read (None: an include was not found, which a new file could change)
+    notes: dict = {"used": set(reader.stream.used_names),
+                   "files": None if reader.unread_includes else list(reader.included)}
     if cam is None:
         if reader.unread_includes:
             raise SceneCameraError(

@@ -60,7 +60,7 @@ def test_bench_auto_tiny(tmp_path, capsys):
     text = (tmp_path / "auto_quick.txt").read_text()
     assert "auto/best" in text and "why auto chose" in text
     assert "(median runs)" in text
-    assert "vignetting's image RMSE" in text               # the probe's image criterion
+    assert "what the map cannot carry (cat's eye)" in text    # the probe's image criterion
 
 
 def test_corrected_rmse_removes_reference_noise_in_quadrature():

@@ -163,7 +163,7 @@ OFF_CENTRE = textwrap.dedent("""\
 
 @needs_povray
 def test_autofocus_takes_the_lit_surface_nearest_to_an_empty_centre(tmp_path):
-    code, plan = _convert(tmp_path, DIRECTION, scene=OFF_CENTRE)
+    code, plan = _convert(tmp_path, DIRECTION, scene=OFF_CENTRE, method="focal-blur")
     assert code == 0
     assert "nearest lit surface" in plan["inputs"]["focus_from"]
     assert plan["inputs"]["focus"] == pytest.approx(4.0, rel=0.03)
@@ -172,7 +172,26 @@ def test_autofocus_takes_the_lit_surface_nearest_to_an_empty_centre(tmp_path):
 @needs_povray
 def test_autofocus_with_nothing_in_the_frame_uses_the_default_distance(tmp_path):
     empty = "#version 3.7;\nCAMERA\nlight_source { <0, 3, -2> color rgb 1 }\n"
-    code, plan = _convert(tmp_path, DIRECTION, scene=empty)
+    code, plan = _convert(tmp_path, DIRECTION, scene=empty, method="focal-blur")
     assert code == 0
-    assert plan["inputs"]["focus_from"].startswith("default distance")
+    assert plan["inputs"]["focus_from"].startswith("default distance (no depth")
     assert plan["inputs"]["focus"] == pytest.approx(5.0)
+    assert "depth_probe" in plan                              # the probe ran
+
+
+def test_a_pinhole_plan_without_a_focus_runs_no_depth_probe(tmp_path, monkeypatch):
+    """A pinhole render has no blur to focus: a camera without focal_point or look_at
+    gets the typical 5 m, and the plan says so, with no probe (issue 14)."""
+    import povlens.plan.autofocus as autofocus
+
+    def no_probe(*args, **kw):
+        raise AssertionError("the depth probe ran")
+    monkeypatch.setattr(autofocus, "start_probe", no_probe)
+    code, plan = _convert(tmp_path, DIRECTION)                # method pinhole
+    assert code == 0
+    assert plan["inputs"]["focus"] == 5.0
+    assert plan["inputs"]["focus_from"] == autofocus.PINHOLE_FOCUS_FROM
+    assert "depth_probe" not in plan
+    notes = [n for n in plan["notes"] if "no depth probe ran" in n]
+    assert len(notes) == 1 and "field of view" in notes[0], plan["notes"]
+    assert not list((tmp_path / "out").glob(".focus.*"))
