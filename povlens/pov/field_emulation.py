@@ -36,9 +36,12 @@ def emulate(mesh: FieldMesh, model: UVModel, rows=None, cols=None):
 
 
 def ray_error_px(mesh: FieldMesh, model: UVModel, ray_field, placement, pixel_angle_rad: float,
-                 rows=None, cols=None) -> dict:
+                 rows=None, cols=None, exact=None) -> dict:
     """The rays POV-Ray traces against the exact ones (``ray_field``, as for
     :func:`povlens.pov.field_mesh.build_field_mesh`), where the lens passes light.
+
+    ``exact``: ``ray_field`` at those pixels' sample positions, when already traced
+    (it depends on the pupil point and offset, not on the mesh).
 
     Returns
     -------
@@ -51,7 +54,8 @@ def ray_error_px(mesh: FieldMesh, model: UVModel, ray_field, placement, pixel_an
     if rows is None:
         rows, cols = (a.ravel() for a in np.mgrid[0:H, 0:W])
     px, py = model.pixel_positions()
-    exact = ray_field(px[cols], py[rows])
+    if exact is None:
+        exact = ray_field(px[cols], py[rows])
     ok = exact.passed
     if not ok.any():
         return {"direction_px": 0.0, "origin_mm": 0.0, "pixels": 0}
