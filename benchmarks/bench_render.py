@@ -12,7 +12,7 @@ For each bundled scene and size it measures, one run each, on this machine's cor
   certification), tracing and writing the meshes and masks (Python), POV-Ray (the
   processes' summed wall time, and one sample's parse and trace time from POV-Ray's
   own statistics), compositing; and the peak memory of the whole process tree
-  (povlens and every POV-Ray it runs, summed RSS, polled every 50 ms).
+  (povlens and every POV-Ray it runs, summed RSS, polled every 0.1 s).
 
 Ratios are ``mesh N / focal_blur N``, render only (render_outdir against render_view)
 and with each method's conversion.  ``--equal-time`` adds, at the first size, the
@@ -54,7 +54,7 @@ SCENES = ROOT / "povlens" / "data" / "scenes"
 class PeakMemory:
     """Peak summed RSS (MB) of this process and all its descendants, polled."""
 
-    def __init__(self, interval_s: float = 0.05):
+    def __init__(self, interval_s: float = 0.1):
         self.interval_s, self.peak_mb = interval_s, 0.0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)

@@ -522,6 +522,12 @@ class _Folder:
                 f"<p>scene {_esc(inp.scene)}, lens {_esc(inp.lens)}, method "
                 f"{_esc(inp.method)}, {inp.samples} samples, {inp.width} x "
                 f"{inp.height} px</p>")
+        fm = self.plan.field_mesh
+        if fm is not None:
+            head += (f"<p>ray meshes: {fm.grid[0]} x {fm.grid[1]} faces (POV-Ray mesh_camera "
+                     f"distribution 3), rays within {fm.max_ray_error_px:.3f} px of the exact "
+                     f"ones (measured over {fm.pupil_points} pupil points; limit "
+                     f"{fm.limit_px:g} px)</p>")
         parts = [self.lens_section(), self.pupil_section()]
         renders, pinhole = self.renders_section()
         parts += [self.focus_section(pinhole), renders, self._times(),

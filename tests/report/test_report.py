@@ -141,6 +141,9 @@ def test_report_is_self_contained_and_every_image_loads_in_chromium(rendered, tm
                    "mesh: POV-Ray", "depth probe", "thin-lens model gets wrong"):
         assert needle in text, needle
     assert "not rendered" not in text
+    from povlens.plan.schema import read_plan
+    fm = read_plan(rendered).field_mesh
+    assert fm is not None and f"rays within {fm.max_ray_error_px:.3f} px" in text
     assert not list(tmp_path.glob(".*"))                       # no temporary left behind
     exe = _chromium()
     proc = subprocess.run([exe, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'chromium'}",
