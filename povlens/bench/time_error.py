@@ -1,9 +1,9 @@
 """Run time against error of the lens-sampling methods (``povlens bench``).
 
 For one scene (default ``scenes/paper.pov``, focus 4 m) and each lens, a
-high-sample reference is rendered with the mesh path (povlens's exit-pupil table,
-scrambled Sobol points with a per-pixel Cranley-Patterson shift, its own seed).
-Then, for each sample count N, four methods render the same frame and are timed
+high-sample reference is rendered with the per-pixel mesh path (povlens's exit-pupil
+table, scrambled Sobol points with a per-pixel Cranley-Patterson shift, its own seed).
+Then, for each sample count N, five methods render the same frame and are timed
 (wall clock) and scored by RMSE against the reference (linear light, all pixels
 and channels):
 
@@ -12,12 +12,14 @@ and channels):
     independent uniform random points (numpy) for film jitter and lens;
 (b) ``pbrt-random``    -- pbrt-style 64-box exit-pupil bounds
     (:class:`povlens.pupil.baselines.PbrtBoxes`), independent uniform random points;
-(c) ``povlens-sobol``  -- povlens's default pipeline: exit-pupil table and
-    scrambled Sobol points (exactly what ``povlens render`` does);
+(c) ``povlens-sobol``  -- povlens's per-pixel meshes (``--ray-mesh pixel``): exit-pupil
+    table and scrambled Sobol points, each pixel its own pupil point;
 (d) ``focal-blur``     -- POV-Ray's ``focal_blur`` with the equivalent thin lens
-    and ``blur_samples N, N`` (``povlens render-view --view focal-blur``).
+    and ``blur_samples N, N`` (``povlens render-view --view focal-blur``);
+(e) ``povlens-field``  -- what ``povlens render`` does by default: field meshes, one
+    pupil point per sample for the whole frame (:mod:`povlens.rendering.field_samples`).
 
-(a)-(c) use the same mesh code as ``povlens render`` (:func:`povlens.rendering.samples.render_samples`
+(a)-(c) and (e) use the same mesh code as ``povlens render`` (:func:`povlens.rendering.samples.render_samples`
 with a sampler and a point override, then :func:`povlens.rendering.samples.composite_outdir`),
 one batch of samples per job, the jobs in parallel.  Timings cover rays, meshes, POV-Ray and compositing; the
 one-off per-lens precomputation (table, pbrt boxes) is reported separately, and
@@ -88,6 +90,7 @@ METHODS = {
     "pbrt-random": "(b) pbrt 64 boxes, random points",
     "povlens-sobol": "(c) povlens table, Sobol points",
     "focal-blur": "(d) focal_blur, blur_samples N",
+    "povlens-field": "(e) povlens field meshes",
 }
 
 REFERENCE_SEED = 7919  # the reference's sample sequence differs from (c)'s (seed 0)
@@ -357,11 +360,12 @@ def run_bench(s: BenchSettings, quiet: bool = False) -> tuple[list[Row], str]:
     extra: dict = {}
     t_start = time.perf_counter()
 
-    def conv(name: str, lens: str, n: int, method: str, seed: int) -> Path:
+    def conv(name: str, lens: str, n: int, method: str, seed: int,
+             ray_mesh: str = "pixel") -> Path:
         d = work / name
         convert(ConvertOptions(scene=s.scene, lens=lens, focus=s.focus, outdir=str(d),
                                width=s.width, height=s.height, method=method, samples=n,
-                               batch_size=math.ceil(n / jobs), seed=seed, ray_mesh="pixel"))
+                               batch_size=math.ceil(n / jobs), seed=seed, ray_mesh=ray_mesh))
         return d
 
     try:
@@ -403,13 +407,14 @@ def run_bench(s: BenchSettings, quiet: bool = False) -> tuple[list[Row], str]:
                         if n == samples[-1]:
                             info["focal_blur_rmse_no_vignetting"] = rmse(img, reference_nv)
                     else:
-                        d = conv(f"{lens_name}-{m}-{n}", lens_name, n, "mesh", s.seed)
+                        d = conv(f"{lens_name}-{m}-{n}", lens_name, n, "mesh", s.seed,
+                                 "field" if m == "povlens-field" else "pixel")
                         for f in cached:  # same lens, focus and film: reuse table/exposure
                             shutil.copy2(f, d / f.name)
                         sampler = samplers.get(m)
                         pts = (random_points(s.height, s.width,
                                              s.seed + 1000 * (1 + list(METHODS).index(m)))
-                               if m != "povlens-sobol" else None)
+                               if m not in ("povlens-sobol", "povlens-field") else None)
                         t0 = time.perf_counter()
                         img = render_mesh(d, sampler=sampler, points=pts, jobs=jobs)
                         secs = time.perf_counter() - t0

@@ -21,7 +21,8 @@ def test_bench_quick_tiny(tmp_path, capsys):
     assert list(rows[0]) == ["method", "lens", "samples", "seconds", "rmse"]
     got = sorted((r["method"], r["lens"], int(r["samples"])) for r in rows)
     want = sorted((m, "dgauss.50mm", n) for m in ("naive-random", "pbrt-random",
-                                                   "povlens-sobol", "focal-blur")
+                                                   "povlens-sobol", "focal-blur",
+                                                   "povlens-field")
                   for n in (4, 16))
     assert got == want
     assert all(float(r["seconds"]) > 0 and float(r["rmse"]) > 0 for r in rows)

@@ -376,3 +376,23 @@ def test_a_cancelled_early_render_leaves_no_povray_and_resumes(tmp_path):
     convert(opts(tmp_path, outdir=str(full), samples=24, batch_size=None))
     render_outdir(full, quiet=True)
     np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(full / "image.exr"))
+
+
+def test_a_damaged_pass_mask_is_a_clear_error_naming_the_file(tmp_path):
+    """Field-mesh samples keep their pass mask (the weights follow from it); a
+    damaged one stops the composite with the file's name, not a traceback or a
+    silently wrong image."""
+    from povlens.errors import PovlensError
+    convert(opts(tmp_path, samples=2, batch_size=2))
+    out = tmp_path / "out"
+    render_outdir(out, jobs=2, quiet=True)
+    masks = sorted((out / "samples").glob("sample_*.mask.npy"))
+    assert len(masks) == 2 and not list((out / "samples").glob("*.weight.exr"))
+    good = composite_outdir(out, write=False)
+    assert np.isfinite(good).all() and good.max() > 0
+    masks[0].write_bytes(b"not a mask")
+    with pytest.raises(PovlensError, match=masks[0].name):
+        composite_outdir(out, write=False)
+    np.save(masks[0], np.zeros((3, 1), np.uint8))       # the wrong size
+    with pytest.raises(PovlensError, match="mask"):
+        composite_outdir(out, write=False)
