@@ -164,7 +164,7 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     d = decide(near_z_mm=near_z, far_z_mm=far_z, model=model, model_error=err,
                pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.tolerance_px,
                vignetting=opts.vignetting, image_error=image_error,
-               catseye=pupil_cut(profile))
+               catseye=pupil_cut(profile), field_meshes=opts.ray_mesh == "field")
     d.numbers["depth_probe"] = info
     if opts.vignetting:     # the render of a view applies this profile (rendering/vignetting)
         d.numbers["illumination_profile"] = profile_record(profile, table)

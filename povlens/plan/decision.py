@@ -73,13 +73,17 @@ __all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "shape_error_px", "vignetting_rmse",
            "samples_for_blur", "pupil_cut", "catseye_px", "catseye_rmse", "pixel_blur_mm",
            "SAMPLE_SPACING_PX", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "SAMPLE_RULE",
            "VIGNETTING_TOLERANCE", "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE",
-           "CATSEYE_SAMPLES", "CATSEYE_RADII"]
+           "CATSEYE_SAMPLES", "CATSEYE_RADII", "FIELD_MESH_SAMPLE_FACTOR"]
 
 #: Largest spacing in pixels between the film copies of one blurred point (target noise).
 SAMPLE_SPACING_PX = 1.0
 #: Samples per squared pixel of blur diameter: (pi/4) / spacing^2.
 SAMPLE_K = (math.pi / 4) / SAMPLE_SPACING_PX ** 2
 MIN_SAMPLES, MAX_SAMPLES = 8, 256
+#: Field meshes need about this many times the samples of per-pixel meshes for the same
+#: error (every pixel shares a sample's pupil point): 2.5x measured at 160x120 and at
+#: 640x480 (docs/decisions/exact-lens-distribution3.md, "The sample rule").
+FIELD_MESH_SAMPLE_FACTOR = 2
 SAMPLE_RULE = (f"N = ceil({SAMPLE_K:.3g} b^2) rounded to the nearest power of two, "
                f"{MIN_SAMPLES}..{MAX_SAMPLES}")
 #: Share of the error budget that what the vignetting map cannot carry (the cat's
@@ -269,7 +273,8 @@ def _numbers(near_z_mm, far_z_mm, model, e: dict, blur: dict, tol: float, vignet
 
 def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
            pixel_pitch_mm: float, tolerance_px: float = 0.5, vignetting: bool = True,
-           image_error: dict | None = None, catseye: dict | None = None) -> Decision:
+           image_error: dict | None = None, catseye: dict | None = None,
+           field_meshes: bool = False) -> Decision:
     """Choose the render method and its lens samples (pure; see the module docstring).
 
     Parameters
@@ -289,6 +294,9 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     catseye : :func:`pupil_cut` of the lens's pupil, for the pixel measure when the
         image gives no ``catseye_rmse``.  Without either, a relative illumination
         below ``1 - VIGNETTING_TOLERANCE`` anywhere is a deviation.
+    field_meshes : a mesh render would use field meshes (one pupil point per sample
+        for the whole frame): its sample count is :data:`FIELD_MESH_SAMPLE_FACTOR`
+        times the rule's, capped at :data:`MAX_SAMPLES`.
 
     Returns
     -------
@@ -335,6 +343,10 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     b_max = max(blur["max_px"], max_real)
     samples = samples_for_blur(b_max)
     numbers["max_blur_px"] = b_max
+    factor = FIELD_MESH_SAMPLE_FACTOR if field_meshes else 1
+    mesh_samples = min(MAX_SAMPLES, factor * samples)
+    field_text = (f", times {factor} for field meshes (every pixel shares a sample's pupil "
+                  f"point)" if factor > 1 else "")
     fb = [check("focal-blur: max distortion", dist, tol),
           check("focal-blur: max blur size error / 2 (the rim moves by half the diameter "
                 "error)", size_err / 2, tol),
@@ -353,8 +365,9 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
             f"but what the map cannot carry (the cat's eye) uses {floor_share:.2f} of it "
             f"(>= {VIGNETTING_FLOOR_SHARE:g}: no focal_blur sample count goes below that "
             f"error), and the {b_max:.3g} px blur needs only the minimum {MIN_SAMPLES} lens "
-            f"samples, which cost about what the adaptive focal blur does, without the floor")
-        return Decision("mesh", samples, reasons, numbers)
+            f"samples, which cost about what the adaptive focal blur does, without the floor"
+            + field_text)
+        return Decision("mesh", mesh_samples, reasons, numbers)
     if fb_ok:
         fbs = FOCAL_BLUR_ADAPTIVE
         numbers["blur_rule_samples"] = samples
@@ -368,9 +381,9 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     why = ("the cat's eye of out-of-focus light, which the vignetting map cannot carry, "
            "is beyond the budget" if all(fb) else
            "the real lens deviates from the equivalent thin lens beyond the budget")
-    reasons.append(f"-> mesh: {why}; {samples} samples for a {b_max:.3g} px blur "
-                   f"({SAMPLE_RULE})")
-    return Decision("mesh", samples, reasons, numbers)
+    reasons.append(f"-> mesh: {why}; {mesh_samples} samples for a {b_max:.3g} px blur "
+                   f"({SAMPLE_RULE}{field_text})")
+    return Decision("mesh", mesh_samples, reasons, numbers)
 
 
 def pupil_cut(profile) -> dict:

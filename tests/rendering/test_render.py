@@ -264,8 +264,9 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, l
     with a 0.2 px budget does too: the lens alone rules out the views, so povlens
     render starts lens samples 0..7 while the depth probe runs, and the samples the
     decision adds follow in the same pipeline (dgauss focused at 1.5 m: ~5 pixels of
-    blur, 16 samples).  The result equals a fixed mesh render of the decided sample
-    count."""
+    blur, 16 samples by the rule, twice that for field meshes).  The result equals a
+    fixed mesh render of the decided sample count."""
+    from povlens.plan.decision import FIELD_MESH_SAMPLE_FACTOR, MIN_SAMPLES
     from povlens.rendering.samples import convert_and_render
     auto = tmp_path / "auto"
     kw = dict(lens=lens, focus=focus, film_diagonal_mm=film_mm, batch_size=None)
@@ -275,7 +276,7 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, l
     assert any("while the depth probe ran" in r for r in plan.decision.reasons)
     assert plan.decision.reasons[-1].startswith("-> mesh")      # the conclusion stays last
     n = plan.inputs.samples
-    assert (n > 8) == (focus == 1.5)
+    assert (n > MIN_SAMPLES * FIELD_MESH_SAMPLE_FACTOR) == (focus == 1.5)
     early = json.loads((auto / "samples" / "early.timing.json").read_text())
     assert early["samples"] == n                     # all of them, in the one pipeline
     assert not (auto / "samples" / "render.timing.json").exists()
