@@ -72,7 +72,7 @@ class PeakMemory:
                 rss[int(d)] = int(parts[21]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
             except (OSError, IndexError, ValueError):
                 pass
-        me, total, todo = os.getpid(), 0.0, [os.getpid()]
+        total, todo = 0.0, [os.getpid()]
         children = {}
         for pid, pp in parent.items():
             children.setdefault(pp, []).append(pid)
@@ -84,7 +84,6 @@ class PeakMemory:
             seen.add(pid)
             total += rss.get(pid, 0.0)
             todo += children.get(pid, [])
-        del me
         return total
 
     def _run(self):

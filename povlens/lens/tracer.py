@@ -103,6 +103,17 @@ def trace_from_scene(lens: LensPrescription, film_distance_mm: float, origin_mm,
     return _trace(lens, film_distance_mm, o, d, toward_film=True)
 
 
+def _finite_unit_rays(o: np.ndarray, d: np.ndarray):
+    """Unit directions, and which rays are usable (finite origin, finite non-zero
+    direction); unusable rays become the axial ray from the origin (finite, flagged)."""
+    with np.errstate(all="ignore"):
+        norm = np.sqrt(np.einsum("ij,ij->i", d, d))
+        ok = np.isfinite(norm) & (norm > 0) & np.all(np.isfinite(o), axis=1)
+        d = np.where(ok[:, None], d / np.where(ok, norm, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
+        o = np.where(ok[:, None], o, 0.0)
+    return o, d, ok
+
+
 def _intersect(c: float, vertex_z: float, x, y, z, dx, dy, dz, sense: float):
     """Where rays meet surface (curvature ``c``, vertex at ``vertex_z``): the hit
     point in local (x, y, s) and the rays that miss it, meet it behind themselves,
@@ -179,11 +190,8 @@ def trace_unclipped_from_film(lens: LensPrescription, film_distance_mm: float, o
     zv = vertex_z_mm(lens.thickness_mm, float(film_distance_mm))
     curv, r2max = lens.curvature_per_mm, lens.aperture_radius_mm ** 2
     margin = np.full((n, S), -np.inf)
+    o, d, ok = _finite_unit_rays(o, d)
     with np.errstate(all="ignore"):
-        norm = np.sqrt(np.einsum("ij,ij->i", d, d))
-        ok = np.isfinite(norm) & (norm > 0) & np.all(np.isfinite(o), axis=1)
-        d = np.where(ok[:, None], d / np.where(ok, norm, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
-        o = np.where(ok[:, None], o, 0.0)
         x, y, z = o[:, 0].copy(), o[:, 1].copy(), o[:, 2].copy()
         dx, dy, dz = d[:, 0].copy(), d[:, 1].copy(), d[:, 2].copy()
         for i in range(S - 1, -1, -1):
@@ -211,11 +219,7 @@ def _trace(lens: LensPrescription, film_distance_mm: float, o: np.ndarray, d: np
     aperture = lens.is_aperture
     n_before, n_after = lens.index_before, lens.index_after
 
-    with np.errstate(all="ignore"):
-        norm = np.sqrt(np.einsum("ij,ij->i", d, d))
-        ok = np.isfinite(norm) & (norm > 0) & np.all(np.isfinite(o), axis=1)
-        d = np.where(ok[:, None], d / np.where(ok, norm, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
-        o = np.where(ok[:, None], o, 0.0)
+    o, d, ok = _finite_unit_rays(o, d)
     blocked_at = np.full(n, -1, dtype=np.int64)
     blocked_at[~ok] = lens.n_surfaces - 1 if not toward_film else 0
 

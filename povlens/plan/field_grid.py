@@ -78,7 +78,7 @@ def _max_error(ctx, grid, eps, points, rows, cols, exact_cache) -> tuple[float, 
     lens, fd, film, plane_z, placement, pa, model = ctx
     px, py = model.pixel_positions()
     worst, worst_origin = 0.0, 0.0
-    for i, P in enumerate(points):
+    for P in points:
         field = lens_ray_field(lens, fd, film, plane_z, P)
         key = (float(P[0]), float(P[1]))
         if key not in exact_cache:      # the exact rays do not depend on the grid
