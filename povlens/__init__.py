@@ -32,6 +32,8 @@ _API = {
     "composite": "povlens.api",
     "compare": "povlens.api",
     "RenderResult": "povlens.api",
+    "render_frames": "povlens.api",
+    "FramesResult": "povlens.api",
     "import_lens": "povlens.api",
     "bundled_lenses": "povlens.lens.bundled",
     "build_pupil_table": "povlens.pupil.build",

@@ -21,7 +21,7 @@ from povlens.plan.options import ConvertOptions
 from povlens.plan.schema import Plan
 
 __all__ = ["read_lens", "focus", "convert", "render", "composite", "compare", "RenderResult",
-           "import_lens"]
+           "import_lens", "render_frames", "FramesResult"]
 
 
 def read_lens(name_or_path: str | os.PathLike) -> LensPrescription:
@@ -140,7 +140,8 @@ class RenderResult:
 def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | os.PathLike,
            focus: float | None = None, method: str = "auto", samples: int | None = None,
            width: int | None = None, height: int | None = None, jobs: int | None = None,
-           progress: bool = False, **options) -> RenderResult:
+           progress: bool = False, scheduler: str | None = None, shared_dir: bool = False,
+           **options) -> RenderResult:
     """Convert ``scene`` and render it through ``lens`` with POV-Ray.
 
     Parameters are those of :func:`convert`, plus:
@@ -153,6 +154,13 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         POV-Ray processes in parallel (default: the number of cores).
     progress : bool
         Show a progress bar on stderr.
+    scheduler : str, optional
+        Address of a Dask scheduler (``tcp://host:8786``; default: the environment's
+        ``POVLENS_SCHEDULER``, else render here): the lens samples render on its
+        workers (:mod:`povlens.cluster`), the same image as here.
+    shared_dir : bool
+        With ``scheduler``: the workers see the scene, lens and ``outdir`` at the same
+        paths, so nothing is sent to them.
 
     Returns
     -------
@@ -161,6 +169,11 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         An interrupted render resumes when called again with the same arguments.
     """
     from povlens.rendering.samples import convert_and_render
+    scheduler = scheduler or os.environ.get("POVLENS_SCHEDULER") or None
+    if shared_dir and scheduler is None:
+        from povlens.errors import ParameterError
+        raise ParameterError("shared_dir", shared_dir, "shared_dir=True needs 'scheduler'",
+                             "give the scheduler's address, or leave out 'shared_dir'")
     overrides = {"method": method, **options}
     if samples is not None:
         overrides.update(samples=int(samples), auto_samples=False)
@@ -168,10 +181,74 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         overrides["width"] = int(width)
     if height is not None:
         overrides["height"] = int(height)
-    plan, exr = convert_and_render(_options(scene, lens, focus, outdir, overrides),
-                                   jobs=jobs, quiet=not progress)
+    opts = _options(scene, lens, focus, outdir, overrides)
+    if scheduler is not None:
+        from povlens.cluster.render import convert_and_render_on_cluster
+        plan, exr = convert_and_render_on_cluster(opts, scheduler, shared_dir=shared_dir,
+                                                  quiet=not progress)
+    else:
+        plan, exr = convert_and_render(opts, jobs=jobs, quiet=not progress)
     exr = Path(exr)
     return RenderResult(plan, exr, exr.with_suffix(".png"))
+
+
+@dataclasses.dataclass(frozen=True)
+class FramesResult:
+    """What :func:`render_frames` made: one record per frame (focus, film distance,
+    field of view, method, folder) and the numbered images (linear EXR, sRGB PNG)."""
+
+    frames: list
+    images_exr: list[Path]
+    images_png: list[Path]
+
+
+def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
+                  outdir: str | os.PathLike, focus, frames: int | None = None,
+                  method: str = "auto", samples: int | None = None, width: int | None = None,
+                  height: int | None = None, jobs: int | None = None, progress: bool = False,
+                  **options) -> FramesResult:
+    """Render a focus pull: one frame per focus distance (:mod:`povlens.rendering.frames`).
+
+    Parameters are those of :func:`render`, except:
+
+    focus : (A, B) tuple or list of float
+        ``(A, B)``: a pull from A to B in ``frames`` frames, even steps in dioptres
+        (1/distance); a list: one frame per distance.  Scene units, positive, finite.
+    frames : int, optional
+        Frames of a pull (at least 2); with a list, its length if given.
+
+    Returns
+    -------
+    FramesResult
+        ``outdir/frame-NNNN/`` is each frame's render folder, ``outdir/image.NNNN.exr``
+        and ``.png`` its image, ``outdir/frames.json`` the index.  Called again with
+        the same arguments, finished frames are skipped and an interrupted one resumes.
+
+    Raises
+    ------
+    ParameterError
+        ``frames`` < 1 or not matching the list, a pull without ``frames`` >= 2, a
+        single distance, distances not positive and finite (``focus``).
+    """
+    from povlens.errors import ParameterError
+    from povlens.plan.focus_series import focus_series
+    from povlens.rendering.frames import render_frames as render_pull
+    if not isinstance(focus, (tuple, list)):
+        raise ParameterError("focus", focus, f"focus={focus!r}: a focus pull is (A, B) or a "
+                             f"list of distances", "for one focus use povlens.render")
+    values = focus_series(list(focus) if isinstance(focus, list) else tuple(focus), frames)
+    overrides = {"method": method, **options}
+    if samples is not None:
+        overrides.update(samples=int(samples), auto_samples=False)
+    if width is not None:
+        overrides["width"] = int(width)
+    if height is not None:
+        overrides["height"] = int(height)
+    records = render_pull(_options(scene, lens, values[0], outdir, overrides), values,
+                          jobs=jobs, quiet=not progress)
+    out = Path(outdir)
+    return FramesResult(records, [out / r.image_exr for r in records],
+                        [out / r.image_png for r in records])
 
 
 def composite(outdir: str | os.PathLike, vignetting: bool | None = None) -> np.ndarray:

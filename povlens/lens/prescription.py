@@ -97,6 +97,10 @@ class LensPrescription:
     file_format: str = "pbrt"
     comments: tuple[str, ...] = ()
     max_stop_diameter_mm: float | None = None
+    #: The stop's shape (:class:`povlens.lens.aperture_shape.ApertureShape`) at row
+    #: ``aperture_shape_row``, or None for round apertures; not part of :meth:`sha256`.
+    aperture_shape: object | None = None
+    aperture_shape_row: int = -1
 
     # ----- derived geometry ------------------------------------------------
     @property
@@ -174,7 +178,8 @@ class LensPrescription:
         return self.replace(radius_mm=self.radius_mm[sl], thickness_mm=self.thickness_mm[sl],
                             index_after=self.index_after[sl] / self.index_before[first],
                             aperture_diameter_mm=self.aperture_diameter_mm[sl],
-                            abbe_vd=self.abbe_vd[sl], lines=self.lines[sl])
+                            abbe_vd=self.abbe_vd[sl], lines=self.lines[sl],
+                            **_shape_rows(self, first))
 
     def __eq__(self, other) -> bool:  # optical equality, used by round-trip tests
         if not isinstance(other, LensPrescription):
@@ -186,6 +191,15 @@ class LensPrescription:
             (self.abbe_vd, other.abbe_vd)))
 
     __hash__ = None
+
+
+def _shape_rows(lens: LensPrescription, first: int) -> dict:
+    """The aperture shape of ``lens.sub_lens(first)``: its row renumbered, or none when
+    the shaped row is not in it."""
+    row = lens.aperture_shape_row - first
+    if lens.aperture_shape is None or row < 0:
+        return {"aperture_shape": None, "aperture_shape_row": -1}
+    return {"aperture_shape_row": row}
 
 
 def resolve_lens_path(name: str | os.PathLike) -> Path:
@@ -237,7 +251,8 @@ def _parse_number(tok: str, source: str, line: int, column: str) -> float:
                             "each row holds radius, thickness, index and aperture diameter "
                             "(and optionally the Abbe number), separated by spaces or tabs; "
                             "comments start with '#'") from None
-    if not math.isfinite(v):
+    # an infinite Abbe number is a medium known not to disperse (lens/dispersion.py)
+    if not math.isfinite(v) and not (column == "Abbe number" and v == math.inf):
         raise LensFileError(source, line, f"{column}: '{tok}' is not a finite number")
     return v
 

@@ -31,7 +31,8 @@ Blocked rays
 ------------
 A ray is blocked at surface i when it misses the sphere (D < 0), meets it
 behind itself (t < -1e-9 mm), lands on the far branch (1 - c s <= 0), lands
-outside the clear aperture (x^2 + y^2 > r_i^2, also at apertures), is
+outside the clear aperture (x^2 + y^2 > r_i^2, also at apertures; at a shaped stop
+outside its iris or mask, :mod:`povlens.lens.aperture_shape`), is
 totally internally reflected, or turns back (its axial direction reverses or
 becomes 0).  Blocked rays are returned with ``passed = False`` and
 ``blocked_at = i``; their origin and direction are the input origin and the
@@ -44,11 +45,12 @@ import dataclasses
 
 import numpy as np
 
+from povlens.lens.aperture_shape import shape_margin_mm2
 from povlens.lens.frames import vertex_z_mm
 from povlens.lens.prescription import LensPrescription
 
 __all__ = ["TraceResult", "UnclippedTrace", "trace_from_film", "trace_from_scene",
-           "trace_unclipped_from_film", "BACKWARD_TOLERANCE_MM"]
+           "trace_unclipped_from_film", "stop_hits_from_film", "BACKWARD_TOLERANCE_MM"]
 
 #: A ray that meets a surface more than this far *behind* itself is blocked.
 BACKWARD_TOLERANCE_MM = 1e-9
@@ -198,7 +200,9 @@ def trace_unclipped_from_film(lens: LensPrescription, film_distance_mm: float, o
             c = curv[i]
             hx, hy, hs, bad = _intersect(c, zv[i], x, y, z, dx, dy, dz, -1.0)
             bad |= ~ok
-            margin[:, i] = np.where(bad, -np.inf, r2max[i] - (hx * hx + hy * hy))
+            m = (r2max[i] - (hx * hx + hy * hy) if i != lens.aperture_shape_row
+                 else shape_margin_mm2(lens, i, hx, hy))
+            margin[:, i] = np.where(bad, -np.inf, m)
             if not lens.is_aperture[i]:
                 ex, ey, ez, tir = _refract(lens.index_after[i] / lens.index_before[i], c,
                                            hx, hy, hs, dx, dy, dz, -1.0)
@@ -208,6 +212,23 @@ def trace_unclipped_from_film(lens: LensPrescription, film_distance_mm: float, o
             x, y, z = np.where(bad, x, hx), np.where(bad, y, hy), np.where(bad, z, zv[i] - hs)
             ok &= ~bad
     return UnclippedTrace(np.stack([x, y, z], 1), np.stack([dx, dy, dz], 1), ok, margin)
+
+
+def stop_hits_from_film(lens: LensPrescription, film_distance_mm: float, origin_mm,
+                        direction) -> np.ndarray:
+    """(n, 2) where rays from the film cross the shaped stop (``lens.aperture_shape_row``;
+    x, y mm, camera frame), traced exactly and unclipped through the rows behind it: the
+    points whose mask transmission weights the rays.
+
+    origin_mm, direction : (n, 3) camera frame, toward +z.  Rays that do not reach the stop
+    get a point far outside it (transmission 0).
+    """
+    row = lens.aperture_shape_row
+    if row < 0:
+        raise ValueError("the lens has no shaped aperture stop")
+    t = trace_unclipped_from_film(lens.sub_lens(row), film_distance_mm, origin_mm, direction)
+    far = 1e6 * max(1.0, float(lens.aperture_radius_mm[row]))
+    return np.where(t.exists[:, None], t.origin_mm[:, :2], far)
 
 
 def _trace(lens: LensPrescription, film_distance_mm: float, o: np.ndarray, d: np.ndarray,
@@ -236,7 +257,10 @@ def _trace(lens: LensPrescription, film_distance_mm: float, o: np.ndarray, d: np
                 break
             c = curv[i]
             hx, hy, hs, bad = _intersect(c, zv[i], x, y, z, dx, dy, dz, sense)
-            bad |= hx * hx + hy * hy > r2max[i]
+            if i == lens.aperture_shape_row:    # a shaped stop (iris, mask): its margin
+                bad |= ~(shape_margin_mm2(lens, i, hx, hy) >= 0.0)
+            else:
+                bad |= hx * hx + hy * hy > r2max[i]
             if not aperture[i]:
                 n1, n2 = (n_before[i], n_after[i]) if toward_film else (n_after[i], n_before[i])
                 dx, dy, dz, tir = _refract(n1 / n2, c, hx, hy, hs, dx, dy, dz, sense)

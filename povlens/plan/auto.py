@@ -76,7 +76,7 @@ def start_depth_probe(opts, film: Film, plan, threads: int = 1) -> DepthProbe:
     pw, ph = probe_size(film)
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
-    view = ProbeView(plan.povray_camera, Film(film.width_mm, film.height_mm, pw, ph),
+    view = ProbeView(plan.povray_camera, film.resized(film.width_mm, film.height_mm, pw, ph),
                      plan.mm_per_unit, str(Path(opts.scene).resolve()), float(opts.focus),
                      povray_options_of(opts))
     return start_probe(view, out, threads=threads, keep_wrappers=False, prefix=".probe.",
@@ -139,13 +139,14 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     try:
         if table is None:  # exact vignetting; normally saved by the plan
             table, _ = cached_pupil_table(Path(opts.outdir) / "pupil.npz", lens, fd,
-                                          film.half_diagonal_mm, save=False)
+                                          film.max_field_radius_mm, save=False)
     except BaseException:
         probe.cancel()
         raise
     # the vignetting map the views get, and the pupil's cut: traced in a thread while
     # the probe finishes and the model error is measured
-    profile_of = run_in_background(lambda: illumination_profile(table, film.half_diagonal_mm))
+    profile_of = run_in_background(lambda: illumination_profile(table,
+                                                                film.max_field_radius_mm))
     axial = probe_axial_mm(probe)
     near_d, far_d, info = measure_depth_range(opts, film, axial_mm=axial)
     if math.isinf(near_d):  # nothing but background: everything at infinity

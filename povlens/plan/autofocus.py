@@ -121,8 +121,10 @@ def pixel_shift_px(a: PovrayCamera, b: PovrayCamera, film: Film, x: float, y: fl
     lies from the point (x, y) of camera ``a`` (same location, same axes)."""
     v = _pixel_direction(b, film, x, y)
     D, R, U = (np.asarray(t, dtype=np.float64) for t in (a.direction, a.right, a.up))
-    # v = s (D + u R + w U) with R, U orthogonal to D: solve in a's image plane
-    s = (D @ D) / (v @ D)
+    # v = s (D + u R + w U): solve in a's image plane, whose normal is R x U (D is
+    # tilted off it by a lens shift, plan.fixed.off_axis_direction)
+    n = np.cross(R, U)
+    s = (n @ D) / (n @ v)
     p = s * v - D
     u = (p @ R) / (R @ R)
     w = (p @ U) / (U @ U)
@@ -184,7 +186,7 @@ def nearest_lit_point(opts: ConvertOptions, st: PlanStart, fade: float
     w, h = st.film.width_px, st.film.height_px
     n_x = min(SEARCH_WIDTH_PX, w)
     n_y = max(1, round(n_x * h / w))
-    coarse = Film(st.film.width_mm, st.film.height_mm, n_x, n_y)
+    coarse = st.film.resized(st.film.width_mm, st.film.height_mm, n_x, n_y)
     view = ProbeView(st.povray_camera, coarse, st.mm_per_unit,
                      str(Path(opts.scene).resolve()), fade, st.povray)
     out = Path(opts.outdir)

@@ -78,8 +78,8 @@ def _settle_speculation(choice: _AutoChoice, guess: str) -> None:
         decision.add_remark("(the focal_blur render started while the probe ran was stopped)")
 
 
-def _choose_automatically(opts: ConvertOptions, render_early, cleanup: contextlib.ExitStack
-                          ) -> _AutoChoice:
+def _choose_automatically(opts: ConvertOptions, render_early, cleanup: contextlib.ExitStack,
+                          depth_probe=None) -> _AutoChoice:
     """``--method auto``: probe the scene, decide, and (``speculate``) start the
     likely render meanwhile.  Everything started is registered on ``cleanup``."""
     if not (opts.tolerance_px > 0 and math.isfinite(opts.tolerance_px)):
@@ -91,7 +91,8 @@ def _choose_automatically(opts: ConvertOptions, render_early, cleanup: contextli
     # The depth probe's POV-Ray processes (mostly idle start-up) and 'povray --version'
     # run while the pupil table is built and the model error measured.  The probe is
     # started from a thread: its process starts do not hold up the pupil table.
-    probe_started = run_in_background(lambda: start_depth_probe(base, start.film, start))
+    starter = depth_probe or start_depth_probe           # a focus pull's frames share one
+    probe_started = run_in_background(lambda: starter(base, start.film, start))
     cleanup.callback(_cancel_probe, probe_started)
     plan0, table = finish_plan(base, start, version=run_in_background(povray_version))
     probe = probe_started()                               # long started by now
@@ -153,7 +154,7 @@ def _keep_speculative_view(view: speculative.SpeculativeView, outdir: Path) -> N
     os.replace(view.out_path, outdir / "view-focal-blur.exr")
 
 
-def convert(opts: ConvertOptions, render_early=None) -> Plan:
+def convert(opts: ConvertOptions, render_early=None, depth_probe=None) -> Plan:
     """Write OUTDIR (plan.json, wrappers, Makefile) and return the plan.
 
     Parameters
@@ -176,6 +177,10 @@ def convert(opts: ConvertOptions, render_early=None) -> Plan:
         adds in the same pipeline), the final plan is written (the rendered
         samples stay: only the count changed) and the handle is waited for, so
         the folder is rendered when this returns.  Otherwise it is cancelled.
+    depth_probe : with ``auto``, what starts the depth probe, called as
+        :func:`~povlens.plan.auto.start_depth_probe` ``(opts, film, plan)`` (default:
+        that function); a focus pull's frames share one
+        (:class:`povlens.plan.probe_reuse.ProbeReuse`).
 
     Returns
     -------
@@ -194,7 +199,7 @@ def convert(opts: ConvertOptions, render_early=None) -> Plan:
     with contextlib.ExitStack() as cleanup:               # unwinds what auto started
         choice = None
         if opts.method == "auto":
-            choice = _choose_automatically(opts, render_early, cleanup)
+            choice = _choose_automatically(opts, render_early, cleanup, depth_probe)
             opts = choice.chosen
         opts, adaptive, range_info = _adaptive_sampling(opts, choice)
         plan = (make_plan(opts) if choice is None

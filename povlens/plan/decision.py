@@ -423,8 +423,9 @@ def film_radius_map_mm(film, width_px: int, height_px: int) -> np.ndarray:
     """(H, W) film radius (mm) of the pixel centres of an image of ``film``'s frame
     at ``width_px`` x ``height_px`` pixels (the depth probe's size)."""
     cols = (np.arange(width_px) + 0.5) / width_px - 0.5
-    rows = (np.arange(height_px) + 0.5) / height_px - 0.5
-    return np.hypot(cols[None, :] * film.width_mm, rows[:, None] * film.height_mm)
+    rows = 0.5 - (np.arange(height_px) + 0.5) / height_px
+    sx, sy = getattr(film, "shift_mm", (0.0, 0.0))          # lens shift (lens.film)
+    return np.hypot(cols[None, :] * film.width_mm + sx, rows[:, None] * film.height_mm + sy)
 
 
 def vignetting_rmse(image: np.ndarray, relative_illumination: np.ndarray) -> float:
@@ -573,7 +574,7 @@ def catseye_rmse(image: np.ndarray, film, table, model, axial_mm: np.ndarray,
     """
     img = np.asarray(image, dtype=np.float64)[..., :3]
     h, w = img.shape[:2]
-    probe = Film(film.width_mm, film.height_mm, w, h)
+    probe = film.resized(film.width_mm, film.height_mm, w, h)
     fxy = probe.film_points_mm().reshape(-1, 2)
     p, wt, p0, w0 = _kernels(table, fxy, n_samples)
     d0 = float(p0[w0 > 0, 0].max() - p0[w0 > 0, 0].min()) if np.any(w0 > 0) else 0.0
@@ -620,7 +621,8 @@ def probe_image_error(image: np.ndarray, film, model_error: dict, tolerance_px: 
     """
     h, w = image.shape[:2]
     if profile is not None:
-        ri_map = relative_illumination_map(profile, film.width_mm, film.height_mm, w, h)
+        ri_map = relative_illumination_map(profile, film.width_mm, film.height_mm, w, h,
+                                           shift_mm=film.shift_mm)
     else:
         heights = np.asarray(model_error["film_height_mm"], dtype=float)
         ri = np.asarray(model_error["relative_illumination"], dtype=float)[0]

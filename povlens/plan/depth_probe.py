@@ -156,8 +156,8 @@ class ProbeView:
         """The view of ``plan``'s pinhole camera, at ``width_px`` x ``height_px``
         (default: the plan's film)."""
         f = plan.film
-        film = Film(f.width_mm, f.height_mm, int(width_px or f.width_px),
-                    int(height_px or f.height_px))
+        film = f.resized(f.width_mm, f.height_mm, int(width_px or f.width_px),
+                         int(height_px or f.height_px))
         return cls(plan.povray_camera, film, plan.mm_per_unit, plan.inputs.scene,
                    float(plan.inputs.focus), povray_options_of(plan.inputs))
 
@@ -244,9 +244,14 @@ def ray_directions(view: ProbeView | Plan) -> np.ndarray:
 
 def axial_depth(view: ProbeView | Plan, distance: np.ndarray) -> np.ndarray:
     """Distance along the viewing direction (as thin-lens depths are measured) of
-    points at ray distance ``distance`` (H, W) from the camera location."""
-    fwd = np.asarray(view.povray_camera.direction, dtype=np.float64)
+    points at ray distance ``distance`` (H, W) from the camera location.  The axis is
+    the image plane's normal (R x U toward ``direction``), which a lens shift's tilted
+    ``direction`` (:func:`povlens.plan.fixed.off_axis_direction`) is not."""
+    cam = view.povray_camera
+    D, R, U = (np.asarray(v, dtype=np.float64) for v in (cam.direction, cam.right, cam.up))
+    fwd = np.cross(R, U)
     fwd = fwd / np.linalg.norm(fwd)
+    fwd = fwd if fwd @ D >= 0 else -fwd
     return np.asarray(distance, dtype=np.float64) * (ray_directions(view) @ fwd)
 
 

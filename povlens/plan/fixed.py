@@ -34,10 +34,13 @@ from typing import Callable
 import numpy as np
 
 from povlens.errors import ParameterError, UsageError
-from povlens.lens.film import Film
+from povlens.lens.film import Film, parse_shift
 from povlens.lens.focus import UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_mm
+from povlens.lens.aperture_shape import shaped_lens
 from povlens.lens.paraxial import paraxial_data, stopped_down
 from povlens.lens.prescription import LensPrescription, read_lens
+from povlens.plan.aperture import apply_aperture_shape, inputs_of_shape, shape_of_options
+from povlens.plan.dispersion_plan import apply_dispersion
 from povlens.plan.options import METHODS, ConvertOptions, povray_options_of
 from povlens.plan.schema import (CameraPlacement, FocusSolution, Inputs, LensSummary, Plan,
                                  PovrayCamera, PovraySettings)
@@ -233,25 +236,57 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
                                povray_options=povray.extra_options)
     lens = stopped_down(read_lens(opts.lens), stop_diameter_mm=opts.stop_diameter_mm,
                         f_number=opts.f_number)
+    lens = shaped_lens(lens, shape_of_options(opts))    # iris / mask (plan.aperture)
     p = paraxial_data(lens)
     cam = _scene_camera(opts)
     film, proportions = film_of(opts, cam)
+    if opts.shift_mm is not None:        # lens shift: the frame off the axis (lens.film)
+        sx, sy = parse_shift(opts.shift_mm)
+        film = dataclasses.replace(film, shift_x_mm=sx, shift_y_mm=sy)
     focus, focus_from = _focus_of(opts, cam)
     focus_mm = focus * mm_per_unit
     film_d, object_d, thick_d, spot = _focus(lens, p, focus_mm, opts.real_focus)
     model = fit_thin_lens(lens, film_d, object_d, film)
     loc, right, up, fwd, cam_source = _camera_basis(opts, cam)
+    # lens shift: an off-axis frustum, POV-Ray's direction tilted by the shift while
+    # right/up (the image plane) stay; focal_blur's focal plane then lies at
+    # focal_distance / |direction| along the axis, so the distance is scaled by it
+    direction = off_axis_direction(fwd, right, up, film, model.image_distance_mm)
+    stretch = float(np.linalg.norm(direction))
     camera = PovrayCamera(
-        location=_vector(loc), direction=_vector(fwd),
+        location=_vector(loc), direction=_vector(direction),
         right=_vector(right * film.width_mm / model.image_distance_mm),
         up=_vector(up * film.height_mm / model.image_distance_mm),
         aperture=2.0 * model.pupil_diameter_mm / mm_per_unit,
-        focal_distance=(model.focus_distance_mm / mm_per_unit
+        focal_distance=(model.focus_distance_mm / mm_per_unit * stretch
                         if math.isfinite(model.focus_distance_mm) else 1e9),
         hfov_deg=math.degrees(2 * math.atan(0.5 * film.width_mm / model.image_distance_mm)))
     return PlanStart(mm_per_unit, lens, p, film, focus_mm, film_d, object_d, thick_d, spot,
                      model, loc, right, up, fwd, cam_source, camera, focus, focus_from,
                      povray, camera_notes(cam, proportions))
+
+
+def off_axis_direction(forward, right, up, film: Film, image_distance_mm: float) -> np.ndarray:
+    """POV-Ray's perspective ``direction`` for a shifted film (:mod:`povlens.lens.film`).
+
+    Parameters
+    ----------
+    forward, right, up : (3,) unit vectors of the camera (world frame).
+    film : the film; its shift (mm, image plane) tilts the direction.
+    image_distance_mm : the thin lens's image distance (mm), which scales right/up.
+
+    Returns
+    -------
+    ndarray
+        (3,) ``forward + (shift_x / v) right + (shift_y / v) up``: POV-Ray traces
+        ``direction + x right + y up`` for x, y in [-1/2, 1/2], so the frame's centre
+        looks where the thin lens images film point -shift; ``forward`` itself
+        (unit) without a shift.
+    """
+    sx, sy = film.shift_mm
+    v = float(image_distance_mm)
+    return (np.asarray(forward, np.float64) + (sx / v) * np.asarray(right, np.float64)
+            + (sy / v) * np.asarray(up, np.float64))
 
 
 #: How the scene-camera reader's note on the camera's proportions begins
@@ -389,7 +424,9 @@ def _inputs(opts: ConvertOptions, st: PlanStart) -> Inputs:
         focus_at=None if opts.focus_at is None else tuple(int(v) for v in opts.focus_at),
         library_paths=st.povray.library_paths, clock=st.povray.clock,
         povray_options=st.povray.extra_options,
-        ray_mesh=opts.ray_mesh if opts.method == "mesh" else None)
+        ray_mesh=opts.ray_mesh if opts.method == "mesh" else None,
+        shift_mm=st.film.shift_mm if st.film.shifted else None,
+        **inputs_of_shape(st.lens.aperture_shape))
 
 
 def _field_mesh(opts: ConvertOptions, plan: Plan, st: PlanStart, placement, table) -> None:
@@ -455,8 +492,9 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_
         model_error = {}
     if table is None and not skip:  # exact vignetting; saved in OUTDIR for the render
         table, _ = cached_pupil_table(Path(opts.outdir) / "pupil.npz", lens,
-                                      st.film_distance_mm, film.half_diagonal_mm,
+                                      st.film_distance_mm, film.max_field_radius_mm,
                                       save=Path(opts.outdir).is_dir())
+    check_shift_sees_light(film, table, lens.source)
     if model_error is None:
         depths = _standard_depths_mm(model, st.object_distance_mm, p.efl)
         model_error = measure_model_error(lens, st.film_distance_mm, model, film, depths,
@@ -481,8 +519,46 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_
         batches=round_robin_batches(opts.samples, opts.batch_size), notes=list(st.notes))
     plan.add_note(_antialias_note(opts, st))
     plan.add_note(PINHOLE_NOTE if skip else None)
+    plan.add_note(shift_focal_blur_note(plan) if opts.method == "focal-blur" else None)
     _field_mesh(opts, plan, st, placement, table)
+    apply_dispersion(opts, plan, lens, table)    # --dispersion: colour numbers, wider disc
+    apply_aperture_shape(opts, plan, lens, table)  # iris/mask: notes, the iris's pupil domain
     return plan, table
+
+
+def check_shift_sees_light(film: Film, table, lens_name: str) -> None:
+    """A :class:`ParameterError` (``shift_mm``) when a lens shift takes the whole frame
+    beyond the lens's image circle (``table.vignetted_beyond_mm``: no pixel would see
+    light); a partly dark frame is the effect, and passes.  No table: no check."""
+    cut = None if table is None else table.vignetted_beyond_mm
+    if not film.shifted or cut is None or film.min_field_radius_mm < cut:
+        return
+    sx, sy = film.shift_mm
+    raise ParameterError("shift_mm", (sx, sy),
+                         f"shift_mm={sx:g},{sy:g}: the frame's nearest point is "
+                         f"{film.min_field_radius_mm:.3g} mm off the axis, beyond {lens_name}'s "
+                         f"image circle (radius {cut:.3g} mm): no pixel would see light",
+                         f"shift less: the frame's nearest edge must stay within "
+                         f"{cut:.3g} mm of the axis")
+
+
+def shift_focal_blur_note(plan: Plan) -> str | None:
+    """The note of a focal-blur plan with a lens shift: POV-Ray's lens disc is
+    perpendicular to the tilted ``direction`` (:func:`off_axis_direction`), so seen
+    along the axis it is cos(theta) narrower along the shift (the focal plane stays
+    perpendicular to the axis).  None without a shift."""
+    if not plan.film.shifted:
+        return None
+    d = np.asarray(plan.povray_camera.direction, dtype=np.float64)
+    r, u = (np.asarray(v, dtype=np.float64) for v in (plan.povray_camera.right,
+                                                       plan.povray_camera.up))
+    axis = np.cross(r, u)
+    cos_t = abs(float(axis @ d)) / float(np.linalg.norm(axis) * np.linalg.norm(d))
+    return (f"lens shift with focal_blur: POV-Ray's lens disc is perpendicular to the "
+            f"shifted view direction, tilted {math.degrees(math.acos(min(1.0, cos_t))):.2g} "
+            f"deg from the axis, so its blur is {100 * (1 - cos_t):.2g} % narrower along the "
+            f"shift than the thin lens's (the focal plane is placed on the axis); "
+            f"--method mesh renders the shifted lens exactly")
 
 
 def run_in_background(fn: Callable):

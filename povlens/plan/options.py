@@ -56,6 +56,14 @@ class ConvertOptions:
     povray_options: tuple[str, ...] = ()  # further POV-Ray options, e.g. ("+A0.3",)
     ray_mesh: str = "field"            # mesh: "field" (coarse interpolated meshes, one pupil
                                        # point per sample) or "pixel" (a face per pixel)
+    shift_mm: tuple[float, float] | None = None  # lens shift (x, y) in mm on the image
+                                       # plane, +y moves the image up (lens.film); None: none
+    aperture_blades: int | None = None  # iris blades N >= 3 (lens.aperture_shape); None: round
+    blade_curvature: float = 0.0       # iris edges: 0 straight ... 1 round
+    blade_rotation_deg: float = 0.0    # iris turn, counter-clockwise (0: a corner at the top)
+    aperture_image: str | None = None  # grey-level mask image over the stop's disc
+    dispersion: bool = False           # mesh: each lens sample at its own wavelength, from
+                                       # the lens's Abbe numbers (povlens.lens.dispersion)
 
 
 def povray_options_of(opts) -> PovrayOptions:

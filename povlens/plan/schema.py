@@ -66,6 +66,15 @@ def _json_ready(obj):
     return obj
 
 
+def _film_dict(film: Film) -> dict:
+    """plan.json's ``film``: the film's fields and pixel pitch; the lens shift only when
+    set (plans before it read and write back unchanged)."""
+    d = dataclasses.asdict(film) | {"pixel_pitch_mm": film.pixel_pitch_mm}
+    if not film.shifted:
+        del d["shift_x_mm"], d["shift_y_mm"]
+    return d
+
+
 def _fields_of(cls, d: dict, **converted) -> Any:
     """``cls`` from the keys of ``d`` that are its fields (missing ones keep their
     defaults), ``converted`` overriding; a required field missing raises KeyError."""
@@ -124,12 +133,25 @@ class Inputs:
     clock: float | None = None
     povray_options: tuple[str, ...] = ()
     ray_mesh: str | None = None
+    shift_mm: tuple[float, float] | None = None
+    #: The stop's shape (povlens.lens.aperture_shape): iris blades, their curvature and
+    #: turn (degrees), the mask image's path and its contents' hash; None: round.
+    aperture_blades: int | None = None
+    blade_curvature: float | None = None
+    blade_rotation_deg: float | None = None
+    aperture_image: str | None = None
+    aperture_image_sha256: str | None = None
+    #: --dispersion: True when each lens sample is traced at its own wavelength
+    #: (povlens.rendering.spectral); None: not asked, or not rendered (plan.notes say why).
+    dispersion: bool | None = None
 
     #: Fields written only when set (--method auto's, the focus's source, the user's
     #: POV-Ray options, the kind of ray mesh: None in plans before field meshes, which
     #: render per-pixel meshes): a plan without them reads and writes back unchanged.
     AUTO_FIELDS = ("requested_method", "tolerance_px", "auto_samples", "focus_from", "focus_at",
-                   "library_paths", "clock", "povray_options", "ray_mesh")
+                   "library_paths", "clock", "povray_options", "ray_mesh", "shift_mm",
+                   "aperture_blades", "blade_curvature", "blade_rotation_deg", "aperture_image",
+                   "aperture_image_sha256", "dispersion")
 
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
@@ -141,7 +163,10 @@ class Inputs:
     @classmethod
     def from_dict(cls, d: dict) -> "Inputs":
         size, at, clock = d.get("film_size_mm"), d.get("focus_at"), d.get("clock")
+        shift = d.get("shift_mm")
         return _fields_of(cls, d, film_size_mm=None if size is None else tuple(size),
+                          shift_mm=None if shift is None else (float(shift[0]),
+                                                               float(shift[1])),
                           focus_at=None if at is None else (int(at[0]), int(at[1])),
                           library_paths=tuple(str(p) for p in d.get("library_paths", ())),
                           clock=None if clock is None else float(clock),
@@ -366,9 +391,18 @@ class FieldMeshSettings:
     pupil_points: int
     pixels_checked: int
     limit_px: float
+    #: With an iris: the pupil points' domain is the stop's polygon, of gauge radius
+    #: ``iris_domain_radius_mm``, turned 180 deg when ``iris_flip``
+    #: (:mod:`povlens.pupil.aperture_domain`); None (not written): the disc.
+    iris_domain_radius_mm: float | None = None
+    iris_flip: bool | None = None
 
     def to_dict(self) -> dict:
-        return _json_ready(dataclasses.asdict(self))
+        d = dataclasses.asdict(self)
+        for k in ("iris_domain_radius_mm", "iris_flip"):
+            if d[k] is None:
+                del d[k]
+        return _json_ready(d)
 
     @classmethod
     def from_dict(cls, d: dict) -> "FieldMeshSettings":
@@ -412,6 +446,9 @@ class Plan:
     notes: list[str] = dataclasses.field(default_factory=list)
     vignetting_map: dict | None = None
     field_mesh: FieldMeshSettings | None = None
+    #: --dispersion on a lens with Abbe numbers: its chromatic aberration
+    #: (povlens.lens.dispersion.chromatic_aberration) and how the samples get colour.
+    dispersion: dict | None = None
 
     def add_note(self, text: str | None) -> None:
         """Add a note (:attr:`notes`) unless it is empty or already there."""
@@ -440,7 +477,7 @@ class Plan:
              "inputs": self.inputs.to_dict(),
              "lens": dataclasses.asdict(self.lens),
              "focus": dataclasses.asdict(self.focus),
-             "film": dataclasses.asdict(self.film) | {"pixel_pitch_mm": self.film.pixel_pitch_mm},
+             "film": _film_dict(self.film),
              "mm_per_unit": self.mm_per_unit,
              "placement": dataclasses.asdict(self.placement),
              "thin_lens": self.thin_lens.to_dict(),
@@ -463,6 +500,8 @@ class Plan:
             d["vignetting_map"] = self.vignetting_map
         if self.field_mesh is not None:
             d["field_mesh"] = self.field_mesh.to_dict()
+        if self.dispersion is not None:
+            d["dispersion"] = self.dispersion
         return _json_ready(d)
 
     @classmethod
@@ -480,7 +519,8 @@ class Plan:
             inputs=Inputs.from_dict(d["inputs"]),
             lens=_fields_of(LensSummary, d["lens"]),
             focus=FocusSolution.from_dict(d["focus"]),
-            film=Film(f["width_mm"], f["height_mm"], int(f["width_px"]), int(f["height_px"])),
+            film=Film(f["width_mm"], f["height_mm"], int(f["width_px"]), int(f["height_px"]),
+                      float(f.get("shift_x_mm", 0.0)), float(f.get("shift_y_mm", 0.0))),
             mm_per_unit=d["mm_per_unit"],
             placement=CameraPlacement.from_dict(d["placement"]),
             thin_lens=EquivalentThinLens(tl["centre_z_mm"], tl["image_distance_mm"],
@@ -498,7 +538,7 @@ class Plan:
             notes=notes,
             field_mesh=None if d.get("field_mesh") is None
             else FieldMeshSettings.from_dict(d["field_mesh"]),
-            vignetting_map=d.get("vignetting_map"))
+            vignetting_map=d.get("vignetting_map"), dispersion=d.get("dispersion"))
 
 
 def plan_path(path: str | os.PathLike) -> Path:

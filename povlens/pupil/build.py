@@ -181,6 +181,10 @@ def build_pupil_table(lens: LensPrescription, film_distance_mm: float,
     """
     t_start = time.perf_counter()
     _check_build_arguments(film_distance_mm, film_half_diagonal_mm, tolerance, n_angles)
+    # A shaped stop (iris, mask) breaks the rotational symmetry the table relies on; it
+    # only removes rays, so the round stop's regions contain its (conservative), and the
+    # field sampler tightens to the shape (povlens.pupil.aperture_domain).
+    lens = lens.replace(aperture_shape=None, aperture_shape_row=-1)
     hd = float(film_half_diagonal_mm)
     _check_stop_is_resolvable(lens)
     zp, plane_used = sampling_plane_z_mm(lens, float(film_distance_mm), plane)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["pass_mask", "PASS", "FAIL", "UNSURE"]
+__all__ = ["pass_mask", "field_transmission", "PASS", "FAIL", "UNSURE"]
 
 PASS, FAIL, UNSURE = 1, 2, 3
 
@@ -121,3 +121,34 @@ def pass_mask(node_x: np.ndarray, node_y: np.ndarray, node_margin: np.ndarray,
             passed[rr, cc] = trace(pixel_x[cc], pixel_y[rr]).passed
             traced += len(rr)
     return passed, {"traced_fraction": traced / passed.size, "unsure_cells": int(len(unsure))}
+
+
+def field_transmission(lens, film_distance_mm: float, film, plane_z_mm: float, pupil_xy_mm,
+                       x, y, passed: np.ndarray) -> np.ndarray:
+    """(H, W) float32 transmission of a mask stop for one field lens sample: each passing
+    pixel's ray, from its image position toward the pupil point, traced exactly to the stop
+    (:func:`povlens.lens.tracer.stop_hits_from_film`; not interpolated from the grid, so a
+    mask feature finer than a mesh cell is still seen), 0 where blocked.
+
+    x : (W,) image x of the pixel columns; y : (H,) of the rows (pixels, as the weights'
+    :func:`povlens.pupil.field.field_weight`).  passed : (H, W) bool.
+    """
+    from povlens.lens.tracer import stop_hits_from_film
+    from povlens.pupil.field import image_to_film_mm
+    out = np.zeros(passed.shape, np.float32)
+    rows, cols = np.nonzero(passed)
+    if not len(rows) or lens.aperture_shape is None or lens.aperture_shape.mask is None:
+        out[rows, cols] = 1.0
+        return out
+    f = image_to_film_mm(film, np.asarray(x, float)[cols], np.asarray(y, float)[rows])
+    origin = np.zeros((len(rows), 3))
+    origin[:, :2] = f
+    direction = np.empty((len(rows), 3))
+    direction[:, 0] = pupil_xy_mm[0] - f[:, 0]
+    direction[:, 1] = pupil_xy_mm[1] - f[:, 1]
+    direction[:, 2] = plane_z_mm
+    hits = stop_hits_from_film(lens, film_distance_mm, origin, direction)
+    row = lens.aperture_shape_row
+    out[rows, cols] = lens.aperture_shape.transmission(hits[:, 0], hits[:, 1],
+                                                        float(lens.aperture_radius_mm[row]))
+    return out

@@ -201,7 +201,11 @@ def film_radius_grid_mm(table, max_radius_mm: float | None = None,
          table.film_radius_mm[table.film_radius_mm <= end]]
     if cut is not None and cut <= hd:
         r.append([cut])
-    return np.unique(np.concatenate(r))
+    r = np.unique(np.concatenate(r))
+    # a knot and a grid radius a rounding apart (e.g. 8.114656880000001 and
+    # 8.11465688) would be bisected into duplicates, which plan.json's record (to
+    # 1e-9 mm) cannot order: keep one
+    return r[np.concatenate([[True], np.diff(r) > 1e-9])]
 
 
 def _frames(table, r: np.ndarray):
@@ -395,29 +399,35 @@ def _widths(table, r, ok, rho, t, sx, sy):
     return radial, tangential, area
 
 
-def _pixel_radii(film_width_mm, film_height_mm, width_px, height_px):
-    """(H, W) film radius (mm) of the pixel centres."""
+def _pixel_radii(film_width_mm, film_height_mm, width_px, height_px, shift_mm=(0.0, 0.0)):
+    """(H, W) film radius (mm) of the pixel centres (frame centre at ``shift_mm``,
+    image plane: x right, y up)."""
     cols = (np.arange(width_px) + 0.5) / width_px - 0.5
-    rows = (np.arange(height_px) + 0.5) / height_px - 0.5
-    return np.hypot(cols[None, :] * film_width_mm, rows[:, None] * film_height_mm)
+    rows = 0.5 - (np.arange(height_px) + 0.5) / height_px
+    return np.hypot(cols[None, :] * film_width_mm + shift_mm[0],
+                    rows[:, None] * film_height_mm + shift_mm[1])
 
 
 def relative_illumination_map(source, film_width_mm: float, film_height_mm: float,
                               width_px: int, height_px: int, *,
-                              pixel_average: bool = True) -> np.ndarray:
+                              pixel_average: bool = True,
+                              shift_mm: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
     """E(pixel) / E(centre) for a film of ``width_px`` x ``height_px`` pixels.
 
     Parameters
     ----------
     source : a :class:`povlens.pupil.table.PupilTable` (the profile is computed,
         :func:`illumination_profile`) or an :class:`IlluminationProfile`.
-    film_width_mm, film_height_mm : the film's size (mm), centred on the axis.
+    film_width_mm, film_height_mm : the film's size (mm), centred on the axis unless
+        shifted.
     width_px, height_px : W and H.
     pixel_average : the mean over each pixel's area, as a mesh render with jittered
         film points composites it (default); False: the value at the pixel centre
         (a render without jitter).  Only pixels where the profile bends measurably
         over the pixel (:data:`CURVATURE_TOLERANCE`) differ; they are averaged over
         :data:`OVERSAMPLE` ^ 2 points.
+    shift_mm : lens shift (x right, y up on the image plane, mm;
+        :class:`povlens.lens.film.Film`): the frame's centre lies that far off the axis.
 
     Returns
     -------
@@ -425,17 +435,18 @@ def relative_illumination_map(source, film_width_mm: float, film_height_mm: floa
         (H, W) float64 >= 0 (1 on the axis, 0 where vignetted; above 1 only where
         a lens's pupil grows off axis), row 0 at the top.  Pixel (i, j) has its
         centre at film radius hypot(((i + 1/2) / W - 1/2) w, ((j + 1/2) / H - 1/2) h)
-        (the film's inversion does not change radii).
+        (the film's inversion does not change radii), plus the shift.
     """
     w_mm, h_mm = float(film_width_mm), float(film_height_mm)
+    sx, sy = (float(v) for v in shift_mm)
     W, H = int(width_px), int(height_px)
     if not (w_mm > 0 and h_mm > 0 and math.isfinite(w_mm) and math.isfinite(h_mm)):
         raise ValueError(f"film {film_width_mm!r} x {film_height_mm!r} mm: must be positive")
     if W < 1 or H < 1:
         raise ValueError(f"image {width_px} x {height_px} pixels: must be at least 1 x 1")
     profile = source if isinstance(source, IlluminationProfile) else illumination_profile(
-        source, 0.5 * math.hypot(w_mm, h_mm))
-    r = _pixel_radii(w_mm, h_mm, W, H)
+        source, math.hypot(0.5 * w_mm + abs(sx), 0.5 * h_mm + abs(sy)))
+    r = _pixel_radii(w_mm, h_mm, W, H, (sx, sy))
     out = profile.at(r)
     if pixel_average:
         h = 0.5 * math.hypot(w_mm / W, h_mm / H)           # half the pixel's diagonal
@@ -443,7 +454,7 @@ def relative_illumination_map(source, film_width_mm: float, film_height_mm: floa
         rows, cols = np.nonzero(bend > CURVATURE_TOLERANCE)
         if rows.size:
             f = (np.arange(OVERSAMPLE) + 0.5) / OVERSAMPLE
-            x = ((cols[:, None, None] + f[None, None, :]) / W - 0.5) * w_mm
-            y = ((rows[:, None, None] + f[None, :, None]) / H - 0.5) * h_mm
+            x = ((cols[:, None, None] + f[None, None, :]) / W - 0.5) * w_mm + sx
+            y = (0.5 - (rows[:, None, None] + f[None, :, None]) / H) * h_mm + sy
             out[rows, cols] = profile.at(np.hypot(x, y)).mean(axis=(1, 2))
     return np.maximum(out, 0.0)

@@ -31,7 +31,7 @@ import numpy as np
 
 from povlens.lens.film import Film
 from povlens.lens.prescription import LensPrescription
-from povlens.lens.tracer import trace_from_film
+from povlens.lens.tracer import stop_hits_from_film, trace_from_film
 from povlens.pupil.sampling import sobol_points
 
 __all__ = ["ScenePlacement", "SampleRays", "sample_points", "sample_rays"]
@@ -108,6 +108,21 @@ class SampleRays:
     weight: np.ndarray
 
 
+def _mask_transmission(lens: LensPrescription, film_distance_mm: float, film_point,
+                       direction, ok: np.ndarray) -> np.ndarray | float:
+    """(n,) transmission of a mask stop where the passing rays cross it (exact hit points,
+    :func:`povlens.lens.tracer.stop_hits_from_film`), 1 elsewhere; 1.0 without a mask."""
+    shape = lens.aperture_shape
+    if shape is None or shape.mask is None or not ok.any():
+        return 1.0
+    t = np.ones(len(ok))
+    idx = np.nonzero(ok)[0]
+    hits = stop_hits_from_film(lens, film_distance_mm, film_point[idx], direction[idx])
+    t[idx] = shape.transmission(hits[:, 0], hits[:, 1],
+                                float(lens.aperture_radius_mm[lens.aperture_shape_row]))
+    return t
+
+
 def sample_rays(lens: LensPrescription, film_distance_mm: float, film: Film, sampler,
                 placement: ScenePlacement, points: np.ndarray,
                 rows: tuple[int, int] | None = None) -> SampleRays:
@@ -140,7 +155,8 @@ def sample_rays(lens: LensPrescription, film_distance_mm: float, film: Film, sam
             direction[r0 * w + idx] = t.direction
             ok[idx] = t.passed
         valid[span] = ok
-        weight[span] = np.where(ok, s.weight, 0.0)
+        weight[span] = np.where(ok, s.weight, 0.0) * _mask_transmission(
+            lens, film_distance_mm, s.film_point, s.direction, ok)
     return SampleRays(placement.points_to_world(origin).reshape(h, w, 3),
                       placement.directions_to_world(direction).reshape(h, w, 3),
                       valid.reshape(h, w), weight.reshape(h, w))

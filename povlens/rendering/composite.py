@@ -24,16 +24,22 @@ def accumulate_samples(
     weight_arrays: Iterable[np.ndarray] | None = None,
     drop_top_rows: int = 0,
     drop_right_columns: int = 0,
+    channel_weights: Sequence[np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The sums of a composite, one sample in memory at a time.
 
     Parameters are those of :func:`composite`; ``weight_arrays`` may be any iterable
     (a generator computing each sample's weights when it is reached).
+    ``channel_weights`` (with ``weight_arrays``): K arrays (3,) multiplying sample
+    k's weights per colour channel, f_kc (spectral samples,
+    :mod:`povlens.rendering.spectral`); the sums are then per channel.
 
     Returns
     -------
-    total : (H, W, C) float64, ``sum_k w_k I_k`` (or ``sum_k I_k`` without weights).
-    weight_sum : (H, W) float64 ``sum_k w_k``, or None without weights.
+    total : (H, W, C) float64, ``sum_k w_k I_k`` (or ``sum_k I_k`` without weights;
+        channels 0..2 ``sum_k f_kc w_k I_kc`` with channel weights).
+    weight_sum : (H, W) float64 ``sum_k w_k`` ((H, W, 3) ``sum_k f_kc w_k`` with
+        channel weights), or None without weights.
     """
     paths = list(sample_paths)
     if not paths:
@@ -58,7 +64,8 @@ def accumulate_samples(
             shape = img.shape
             total = np.zeros(shape, dtype=np.float64)
             if weights is not None:
-                wsum = np.zeros(shape[:2], dtype=np.float64)
+                wsum = np.zeros(shape[:2] + ((3,) if channel_weights is not None else ()),
+                                dtype=np.float64)
         elif img.shape != shape:
             raise PovlensError(
                 f"image {p} has shape {img.shape} after dropping {drop} row(s), but "
@@ -79,6 +86,12 @@ def accumulate_samples(
             )
         if not np.all(np.isfinite(w)) or np.any(w < 0):
             raise PovlensError(f"weight array {k} (for {p}) has negative or non-finite values")
+        if channel_weights is not None:
+            wc = w[:, :, None] * np.asarray(channel_weights[k], dtype=np.float64)[None, None, :3]
+            total[..., :3] += wc * img[..., :3]
+            total[..., 3:] += w[:, :, None] * img[..., 3:]
+            wsum += wc
+            continue
         total += w[:, :, None] * img
         wsum += w
     if weights is not None and next(weights, None) is not None:

@@ -52,16 +52,19 @@ from tqdm import tqdm
 from povlens.errors import ParameterError, PovlensError, PovrayError
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.options import povray_options_of
+from povlens.plan.aperture import shape_of_inputs
 from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pupil.sampling import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
 from povlens.rendering.composite import accumulate_samples
+from povlens.rendering.spectral import plan_channel_factors, spectral_image
 from povlens.util.images import read_image, write_exr, write_png_srgb
 from povlens.pupil.rays import sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
 from povlens.rendering.field_samples import (field_sample_weight, mask_path, placement_of,
                                              write_field_sample)
 from povlens.util.files import write_text
+from povlens.lens.aperture_shape import shaped_lens
 from povlens.lens.paraxial import stopped_down
 from povlens.pov.povray_output import error_in_wrapper, povray_error_text
 from povlens.pov.executable import find_povray
@@ -72,7 +75,7 @@ from povlens.lens.prescription import read_lens
 __all__ = ["convert_and_render", "render_samples", "render_batch", "sample_rows", "sample_weight",
            "samples_per_pixel", "render_view", "composite_outdir", "render_outdir",
            "pupil_table_for", "lens_for", "exposure_for", "film_row_args", "EarlyRender",
-           "POVRAY_IN_FLIGHT", "MESH_SWITCHES"]
+           "POVRAY_IN_FLIGHT", "MESH_SWITCHES", "sample_done", "mark_batches_done"]
 
 
 def lens_for(plan: Plan):
@@ -84,14 +87,14 @@ def lens_for(plan: Plan):
     if lens.sha256() != inp.lens_sha256:
         raise PovlensError(f"the lens file {inp.lens} changed since 'povlens convert'",
                            "run 'povlens convert' again")
-    return lens
+    return shaped_lens(lens, shape_of_inputs(inp))     # iris / mask (plan.aperture)
 
 
 def pupil_table_for(outdir: Path, plan: Plan, lens):
     """The exit-pupil table of this plan, from ``pupil.npz`` if it is current."""
     film = plan.film
     table, _ = cached_pupil_table(Path(outdir) / "pupil.npz", lens,
-                                  plan.focus.film_distance_mm, film.half_diagonal_mm)
+                                  plan.focus.film_distance_mm, film.max_field_radius_mm)
     return table
 
 
@@ -488,14 +491,19 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
         paths = [_sample_paths(outdir, k)[0] for k in rendered]
         # sum w I / sum w, in float64, one sample in memory at a time (composite.py);
         # times sum w / N_p for the measurement
+        spectral = plan_channel_factors(plan)    # --dispersion: per-channel weights
         total, wsum = accumulate_samples(
             paths, (sample_weight(outdir, k, plan, table) for k in rendered),
-            drop_top_rows=drop, drop_right_columns=plan.povray.drop_right_columns)
-        image = np.zeros(total.shape[:2] + (3,))
-        nz = wsum > 0
-        image[nz] = total[nz][:, :3] / wsum[nz][:, None]
-        if vignetting:
-            image *= (wsum * exposure / n_p[:, None])[..., None]
+            drop_top_rows=drop, drop_right_columns=plan.povray.drop_right_columns,
+            channel_weights=None if spectral is None else spectral[0][rendered])
+        if spectral is not None:
+            image = spectral_image(total, wsum, spectral[1], exposure if vignetting else None)
+        else:
+            image = np.zeros(total.shape[:2] + (3,))
+            nz = wsum > 0
+            image[nz] = total[nz][:, :3] / wsum[nz][:, None]
+            if vignetting:
+                image *= (wsum * exposure / n_p[:, None])[..., None]
     if write:
         _finish_image(outdir, image.astype(np.float32))
     return image
@@ -504,6 +512,17 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
 def _progress(total: int, desc: str, quiet: bool):
     return tqdm(total=total, desc=desc, unit="sample", disable=quiet or not sys.stderr.isatty(),
                 file=sys.stderr)
+
+
+def sample_done(outdir: str | os.PathLike, k: int) -> bool:
+    """Whether lens sample k of a mesh folder is rendered (a resumed render skips it);
+    :mod:`povlens.cluster` renders the others on a Dask cluster."""
+    return _sample_done(Path(outdir), k)
+
+
+def mark_batches_done(outdir: str | os.PathLike, plan: Plan) -> None:
+    """Write ``batch_BBB.done`` (make's target) for each batch whose samples are done."""
+    _mark_batches_done(Path(outdir), plan)
 
 
 def _mark_batches_done(outdir: Path, plan: Plan) -> None:
@@ -640,7 +659,7 @@ class EarlyRender:
 
 
 def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: bool = False,
-                       on_plan=None) -> tuple[Plan, Path]:
+                       on_plan=None, depth_probe=None) -> tuple[Plan, Path]:
     """What ``povlens render`` does: convert ``opts`` and render the folder
     (:func:`render_outdir`).
 
@@ -648,14 +667,16 @@ def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: boo
     probe runs (``speculate`` of :func:`povlens.plan.convert.convert`): the adaptive
     focal_blur view, or, when the lens alone rules out the views, the first lens
     samples of the mesh render (``render_early``).  ``on_plan(plan)`` is called
-    between conversion and rendering.  Returns (plan, path of image.exr)."""
+    between conversion and rendering; ``depth_probe`` goes to ``convert`` (a focus
+    pull's frames share one probe).  Returns (plan, path of image.exr)."""
     jobs = jobs or os.cpu_count() or 1
 
     def render_early(plan, lens, table):
         return EarlyRender(Path(opts.outdir), plan, lens, table, POVRAY_IN_FLIGHT * jobs,
                            quiet)
 
-    plan = convert(dataclasses.replace(opts, speculate=True), render_early=render_early)
+    plan = convert(dataclasses.replace(opts, speculate=True), render_early=render_early,
+                   depth_probe=depth_probe)
     if on_plan is not None:
         on_plan(plan)
     return plan, render_outdir(opts.outdir, jobs=jobs, quiet=quiet)

@@ -59,7 +59,7 @@ def vignetting_profile(plan: Plan, table) -> IlluminationProfile:
         got = profile_from_record(rec, table)
         if got is not None:
             return got
-    fresh = illumination_profile(table, plan.film.half_diagonal_mm)
+    fresh = illumination_profile(table, plan.film.max_field_radius_mm)
     return profile_from_record(profile_record(fresh, table), table)
 
 
@@ -92,7 +92,8 @@ def _map_of(plan: Plan, table):
     film = plan.film
     profile = vignetting_profile(plan, table)
     ri = relative_illumination_map(profile, film.width_mm, film.height_mm, film.width_px,
-                                   film.height_px, pixel_average=bool(plan.inputs.jitter))
+                                   film.height_px, pixel_average=bool(plan.inputs.jitter),
+                                   shift_mm=film.shift_mm)
     return profile, ri
 
 

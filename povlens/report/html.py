@@ -47,6 +47,8 @@ from povlens.pupil.plot import plot_pupil_shapes
 from povlens.pupil.storage import cached_pupil_table
 from povlens.rendering.samples import composite_outdir, lens_for, render_view
 from povlens.report.compare import compare_arrays, difference_magnitude, false_colour
+from povlens.rendering.frames import read_frames
+from povlens.report.frames_strip import frames_section, is_frames_folder
 from povlens.util.files import write_text
 from povlens.util.images import read_image
 
@@ -273,7 +275,7 @@ class _Folder:
     # -- lens and paraxial data --
     def lens_section(self) -> str:
         fd = self.plan.focus.film_distance_mm
-        fig = lens_figure(self.lens, fd, self.film.half_diagonal_mm,
+        fig = lens_figure(self.lens, fd, self.film.max_field_radius_mm,
                           f"{Path(self.lens.source).name} focused at "
                           f"{self.plan.inputs.focus:g} {self.plan.inputs.units}")
         p = self.p
@@ -317,7 +319,9 @@ class _Folder:
             [f"depth of field (circle of confusion {COC_PIXELS:g} px)",
              f"{_num(near, '.4g')} to {_num(far, '.4g')} {_esc(units)}"],
             ["film", f"{self.film.width_mm:g} x {self.film.height_mm:g} mm, "
-                     f"{self.film.width_px} x {self.film.height_px} px"],
+                     f"{self.film.width_px} x {self.film.height_px} px"
+                     + (f", shifted {self.film.shift_x_mm:g}, {self.film.shift_y_mm:g} mm"
+                        if self.film.shifted else "")],
         ]
         return ("<h3>Lens</h3>" + _img(_fig_uri(fig, 110), "lens drawing", "fig")
                 + '<div class="row"><div><h4>Paraxial data</h4>'
@@ -328,7 +332,7 @@ class _Folder:
     # -- exit pupil --
     def pupil_section(self) -> str:
         fd = self.plan.focus.film_distance_mm
-        hd = self.film.half_diagonal_mm
+        hd = self.film.max_field_radius_mm            # a shifted frame's farthest corner
         table, reused = cached_pupil_table(self.dir / "pupil.npz", self.lens, fd, hd, save=False)
         if not reused:
             self.timings.append(("exit-pupil table (built for this report)",
@@ -537,6 +541,18 @@ class _Folder:
             "</section>"
 
 
+
+class _FramesFolder:
+    """A focus pull's folder (``render --frames``): its strip (:mod:`povlens.report.frames_strip`)."""
+
+    def __init__(self, outdir: Path):
+        self.dir = outdir
+        read_frames(outdir)                   # validate before working
+
+    def html(self, anchor: str) -> str:
+        return frames_section(self.dir, anchor)
+
+
 _CSS = """
 body { font-family: sans-serif; margin: 1.5em; color: #222; max-width: 1400px; }
 table { border-collapse: collapse; margin: 0.5em 0 1em; font-size: 0.9em; }
@@ -577,7 +593,8 @@ def make_report(outdirs, output, render_missing: bool = True) -> Path:
     out = Path(output)
     if not out.parent.is_dir():
         raise PovlensError(f"-o {out}: the folder {out.parent} does not exist")
-    folders = [_Folder(d, render_missing) for d in dirs]   # validate all before working
+    folders = [_FramesFolder(d) if is_frames_folder(d) else _Folder(d, render_missing)
+               for d in dirs]                         # validate all before working
     sections, toc = [], []
     for k, f in enumerate(folders):
         anchor = f"folder{k}"

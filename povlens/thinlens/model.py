@@ -85,7 +85,7 @@ def fit_thin_lens(lens: LensPrescription, film_distance_mm: float, focus_z_mm: f
     on the plane ``focus_z_mm`` (camera frame z, mm; inf allowed)."""
     p = paraxial_data(lens)
     centre = film_distance_mm + p.total_track - p.entrance_pupil_position
-    h = np.linspace(0.0, film.half_diagonal_mm, n_field)[1:]
+    h = np.linspace(0.0, film.max_field_radius_mm, n_field)[1:]   # a shifted frame's too
     rays, found = chief_rays(lens, film_distance_mm, h)
     good = found & np.all(np.isfinite(rays.direction), axis=1) & (rays.direction[:, 2] > 0)
     if good.sum() >= 2:

@@ -53,7 +53,7 @@ def _bundle_geometry(lens, film_distance_mm, model, film, object_z_mm, n_field, 
     that plane (F, 2) (the film point lies along -diagonal)."""
     pitch = film.pixel_pitch_mm
     depths = np.atleast_1d(np.asarray(object_z_mm, dtype=np.float64))
-    hs = np.linspace(0.0, film.half_diagonal_mm, n_field)
+    hs = np.linspace(0.0, film.max_field_radius_mm, n_field)   # out to a shifted frame's corner
     diag_dir = np.array([film.width_mm, film.height_mm]) / math.hypot(film.width_mm, film.height_mm)
     disc = pupil_disc_points(n_rings) * (0.75 * model.pupil_diameter_mm)
     ep_z = model.centre_z_mm

@@ -1,0 +1,145 @@
+"""The aperture stop's shape of a conversion: options -> :class:`ApertureShape`, plan.json.
+
+``--aperture-blades N`` (with ``--blade-curvature``, ``--blade-rotation``) makes an iris,
+``--aperture-image MASK.png`` a grey-level mask over the stop's disc
+(:mod:`povlens.lens.aperture_shape`).  The mask image is read here, through
+:mod:`povlens.util.images` (the lens layer reads no images), as stored values (no
+linearisation: 0.5 grey transmits half), the mean of its colour channels (alpha ignored).
+plan.json's ``inputs`` keep the shape and the mask file's hash, so
+:func:`shape_of_inputs` rebuilds the same shape for the render (and refuses a changed mask).
+
+Only the exact-ray method draws the shape: POV-Ray's ``focal_blur`` samples a round
+aperture, so ``--method focal-blur`` renders it round (:data:`FOCAL_BLUR_NOTE`) and
+``--method auto`` renders mesh whenever the blur is visible (:data:`AUTO_NOTE`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from povlens.errors import ParameterError, PovlensError
+from povlens.lens.aperture_shape import ApertureShape
+
+__all__ = ["shape_of_options", "shape_of_inputs", "inputs_of_shape", "read_mask", "describe",
+           "apply_aperture_shape", "FOCAL_BLUR_NOTE", "AUTO_NOTE", "PINHOLE_NOTE"]
+
+FOCAL_BLUR_NOTE = ("the aperture shape ({what}) is drawn only by the exact lens rays: "
+                   "focal_blur renders a round aperture (use --method mesh)")
+AUTO_NOTE = ("the aperture shape ({what}) is drawn only by the exact lens rays, so auto "
+             "renders mesh where the blur is visible (focal_blur cannot draw it)")
+PINHOLE_NOTE = ("the aperture shape ({what}) does not show: the blur is below the "
+                "tolerance everywhere, so auto renders a pinhole view")
+
+
+def _file_sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def read_mask(path) -> np.ndarray:
+    """(H, W) float64 transmission of a mask image file (values as stored, 0..1).
+
+    Raises ParameterError (``aperture_image``) for a missing, unreadable or non-image
+    file, one-line messages naming it."""
+    from povlens.util.images import ImageError, read_image
+    p = Path(path)
+    if not p.is_file():
+        raise ParameterError("aperture_image", str(path),
+                             f"aperture_image={path}: no such file", "check the path")
+    try:
+        img = read_image(p)
+    except ImageError as e:
+        raise ParameterError("aperture_image", str(path),
+                             f"aperture_image={path}: not a readable image "
+                             f"({e.message.splitlines()[0]})",
+                             "give a grey-level PNG (white open, black opaque)") from None
+    c = img.shape[2]
+    colour = img[:, :, :3] if c >= 3 else img[:, :, :1]
+    return np.asarray(colour, dtype=np.float64).mean(axis=2)
+
+
+def _shape(blades, curvature, rotation_deg, image) -> ApertureShape | None:
+    if blades is None and image is None:
+        return None
+    mask = read_mask(image) if image is not None else None
+    return ApertureShape(blades=blades, curvature=0.0 if curvature is None else curvature,
+                         rotation_deg=0.0 if rotation_deg is None else rotation_deg,
+                         mask=mask, mask_source=str(image) if image is not None else "")
+
+
+def shape_of_options(opts) -> ApertureShape | None:
+    """The shape asked for by :class:`~povlens.plan.options.ConvertOptions` (None: round).
+    ``blade_curvature`` / ``blade_rotation_deg`` without blades are refused (they would
+    do nothing)."""
+    blades = getattr(opts, "aperture_blades", None)
+    if blades is None:
+        for name in ("blade_curvature", "blade_rotation_deg"):
+            v = getattr(opts, name, 0.0)
+            if v not in (None, 0.0):
+                raise ParameterError(name, v, f"{name}={v}: needs an iris",
+                                     "give aperture_blades=N too")
+    return _shape(blades, getattr(opts, "blade_curvature", 0.0),
+                  getattr(opts, "blade_rotation_deg", 0.0), getattr(opts, "aperture_image", None))
+
+
+def inputs_of_shape(shape: ApertureShape | None) -> dict:
+    """The plan.json ``inputs`` fields of ``shape`` (empty for the round stop)."""
+    if shape is None:
+        return {}
+    d: dict = {}
+    if shape.blades is not None:
+        d.update(aperture_blades=shape.blades, blade_curvature=shape.curvature,
+                 blade_rotation_deg=shape.rotation_deg)
+    if shape.mask is not None:
+        p = Path(shape.mask_source).resolve()
+        d.update(aperture_image=str(p), aperture_image_sha256=_file_sha256(p))
+    return d
+
+
+def shape_of_inputs(inputs) -> ApertureShape | None:
+    """The shape a plan's :class:`~povlens.plan.schema.Inputs` recorded, read again;
+    refused if the mask file changed since the conversion."""
+    image = getattr(inputs, "aperture_image", None)
+    if image is not None:
+        p = Path(image)
+        if not p.is_file() or _file_sha256(p) != inputs.aperture_image_sha256:
+            raise PovlensError(f"the aperture mask {image} changed or is gone since "
+                               "'povlens convert'", "run 'povlens convert' again")
+    return _shape(getattr(inputs, "aperture_blades", None),
+                  getattr(inputs, "blade_curvature", None),
+                  getattr(inputs, "blade_rotation_deg", None), image)
+
+
+def describe(shape: ApertureShape) -> str:
+    """A few words for notes: '6 blades, curvature 0.2, turned 15 deg' / 'mask ring.png'."""
+    parts = []
+    if shape.blades is not None:
+        parts.append(f"{shape.blades} blades" + (f", curvature {shape.curvature:g}"
+                                                 if shape.curvature else "")
+                     + (f", turned {shape.rotation_deg:g} deg" if shape.rotation_deg else ""))
+    if shape.mask is not None:
+        parts.append(f"mask {Path(shape.mask_source).name}")
+    return "; ".join(parts)
+
+
+def apply_aperture_shape(opts, plan, lens, table) -> None:
+    """What a shaped stop changes in a finished plan: ``focal-blur`` gets
+    :data:`FOCAL_BLUR_NOTE`; a field-mesh plan of an iris samples the iris's pupil domain
+    (:func:`povlens.pupil.aperture_domain.iris_domain`; not with ``--dispersion``, whose
+    disc spans the wavelengths' pupils)."""
+    import dataclasses
+    shape = lens.aperture_shape
+    if shape is None:
+        return
+    if opts.method == "focal-blur":
+        plan.add_note(FOCAL_BLUR_NOTE.format(what=describe(shape)))
+    fm = plan.field_mesh
+    if (fm is None or shape.blades is None or shape.mask is not None or table is None
+            or getattr(plan.inputs, "dispersion", None)):
+        return
+    from povlens.pupil.aperture_domain import iris_domain
+    radius, flip, _ = iris_domain(lens, plan.focus.film_distance_mm, table)
+    plan.field_mesh = dataclasses.replace(fm, iris_domain_radius_mm=float(radius),
+                                          iris_flip=bool(flip))

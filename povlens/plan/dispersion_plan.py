@@ -1,0 +1,85 @@
+"""``--dispersion`` in a plan: the lens's chromatic aberration and what is rendered.
+
+A lens with Abbe numbers (:func:`povlens.lens.dispersion.has_abbe_numbers`) gets
+``plan.dispersion``: its lateral colour (F against C chief-ray landing, pixels,
+across the field) and longitudinal colour (paraxial focus shift, mm), measured by
+:func:`povlens.lens.dispersion.chromatic_aberration`.  Only mesh plans with field
+meshes render the colour (``inputs.dispersion`` True): each lens sample is traced
+at its own wavelength (:mod:`povlens.rendering.spectral`), and the pupil disc
+the samples' pupil points are drawn from is enlarged to hold every wavelength's
+pass region.  Otherwise a note says why the render shows none.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from povlens.lens.dispersion import (BAND_NM, chromatic_aberration, has_abbe_numbers,
+                                     lens_at_wavelength, pass_radius_mm)
+from povlens.pupil.field import DISC_MARGIN
+
+__all__ = ["apply_dispersion", "disc_radius_mm", "COLOUR_MODEL"]
+
+#: How the samples' wavelengths become RGB (plan.json; povlens.rendering.spectral).
+COLOUR_MODEL = ("Cauchy n = A + B/lambda^2 through n_d and n_F - n_C = (n_d - 1)/V_d; "
+                "wavelengths importance-sampled over the band from the CIE 1931 2-degree "
+                "colour-matching functions in linear sRGB (negative lobes clipped), "
+                "normalised per channel")
+
+
+def disc_radius_mm(lens, film_distance_mm: float, film_radius_mm: float, plane_z_mm: float,
+                   d_line_radius_mm: float) -> float:
+    """A pupil-disc radius (mm, on the table's plane) holding the pass region of every
+    wavelength of :data:`~povlens.lens.dispersion.BAND_NM`: the d line's
+    ``d_line_radius_mm`` or, if larger, the band ends' pass radius
+    (:func:`~povlens.lens.dispersion.pass_radius_mm`) with the disc margin.  The
+    pupils scale monotonically with the index, so the band ends bound the band."""
+    radius = float(d_line_radius_mm)
+    for lam in BAND_NM:
+        lam_lens = lens_at_wavelength(lens, lam)
+        search = 1.5 * radius
+        r = pass_radius_mm(lam_lens, film_distance_mm, film_radius_mm, plane_z_mm, search)
+        if r > search:                   # the search disc was too small: once wider
+            r = pass_radius_mm(lam_lens, film_distance_mm, film_radius_mm, plane_z_mm, 3 * r)
+        radius = max(radius, r * (1.0 + DISC_MARGIN))
+    return radius
+
+
+def apply_dispersion(opts, plan, lens, table) -> None:
+    """Record ``--dispersion`` in ``plan`` (module docstring); nothing without it.
+
+    Parameters
+    ----------
+    opts : the :class:`~povlens.plan.options.ConvertOptions`.
+    plan : the plan being finished (its field meshes already chosen).
+    lens : the stopped-down lens; table : its exit-pupil table (None for pinhole).
+    """
+    if not opts.dispersion:
+        return
+    if not has_abbe_numbers(lens):
+        plan.add_note(f"--dispersion: the lens file {lens.source} gives no Abbe numbers "
+                      f"(5th column V_d), so it renders without dispersion")
+        return
+    film, focus = plan.film, plan.focus
+    info = chromatic_aberration(lens, focus.film_distance_mm,
+                                focus.object_distance_from_film_mm, film.half_diagonal_mm,
+                                film.pixel_pitch_mm)
+    info.update(rendered=False, band_nm=list(BAND_NM), model=COLOUR_MODEL)
+    plan.dispersion = info
+    colour = (f"lateral colour up to {info['max_lateral_colour_px']:.2g} px, longitudinal "
+              f"{info['longitudinal_colour_mm'] or 0.0:.2g} mm")
+    if opts.method != "mesh":
+        plan.add_note(f"--dispersion: only the mesh method renders colour fringes; this "
+                      f"{opts.method} render shows none ({colour})")
+        return
+    if plan.field_mesh is None:
+        plan.add_note(f"--dispersion is rendered with field meshes only; these per-pixel "
+                      f"meshes render the d line ({colour})")
+        return
+    fm = plan.field_mesh
+    field_radius = max(film.half_diagonal_mm, float(table.max_film_radius_mm))
+    radius = disc_radius_mm(lens, focus.film_distance_mm, field_radius, table.plane_z_mm,
+                            fm.pupil_disc_radius_mm)
+    info.update(rendered=True, pupil_disc_radius_d_line_mm=fm.pupil_disc_radius_mm)
+    plan.field_mesh = dataclasses.replace(fm, pupil_disc_radius_mm=radius)
+    plan.inputs = dataclasses.replace(plan.inputs, dispersion=True)
