@@ -44,8 +44,8 @@ def _distance(text: str, whole: str) -> float:
                              "(scene units)") from None
     if not (v > 0 and math.isfinite(v)):
         raise ParameterError("focus", whole, f"focus={whole}: '{text}' must be a positive "
-                             f"finite distance", "for a pull to infinity give a far "
-                             "distance, e.g. 1e6")
+                             f"finite distance", "distances are scene units from the "
+                             "camera; for infinity give a far one, e.g. 1e6")
     return v
 
 
