@@ -4,9 +4,10 @@
 :func:`render_outdir_on_cluster` sends every lens sample not yet rendered to the
 scheduler as one task (:func:`povlens.cluster.worker.render_sample`), the render
 folder's bundle (:mod:`povlens.cluster.bundle`) scattered to every worker once.  Each
-sample's files are written into ``OUTDIR/samples/`` (atomically) as it comes back,
-and the composite is :func:`povlens.rendering.samples.composite_outdir`, in sample
-order, so the image is bit for bit the one a local render makes.  A worker that dies
+sample's files are written into ``OUTDIR/samples/`` (atomically) as it comes back
+and added to the composite's sums, in sample order (:func:`povlens.rendering.samples.sample_sums`,
+then :func:`~povlens.rendering.samples.composite_outdir`), so the image is bit for bit
+the one a local render makes.  A worker that dies
 loses its samples in flight; the scheduler runs them again on another worker.  An
 interrupted render resumes from the samples on disk, locally or on a cluster.
 """
@@ -27,7 +28,7 @@ from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import read_plan
 from povlens.rendering.samples import (composite_outdir, exposure_for, lens_for,
                                        mark_batches_done, pupil_table_for, render_outdir,
-                                       sample_done)
+                                       sample_done, sample_sums)
 from povlens.util.files import write_bytes, write_text
 
 __all__ = ["ENV_VAR", "CONNECT_TIMEOUT_S", "WORKER_WAIT_S", "scheduler_address", "connect",
@@ -109,8 +110,41 @@ def _submit(client, job: dict, todo: list[int], worker_wait_s: float) -> list:
                           retries=RETRIES, pure=False) for k in todo]
 
 
-def _collect(client, futures, outdir: Path, shared: bool, on_sample, bar) -> list[dict]:
-    """Write each sample's files as it comes back; returns the results' timings."""
+class _Sums:
+    """The composite's sums, added in sample order as the samples arrive (one that
+    comes early waits on disk for those before it), so the composite is the one of a
+    local render bit for bit and its cost overlaps the cluster's rendering."""
+
+    def __init__(self, outdir: Path, plan, table):
+        self.outdir, self.plan, self.table = outdir, plan, table
+        self.next_k, self.ready = 0, set()
+        self.total = self.wsum = None
+        self.seconds = 0.0
+
+    def add(self, k: int) -> None:
+        t0 = time.perf_counter()
+        self.ready.add(k)
+        while self.next_k in self.ready:
+            terms = sample_sums(self.outdir, self.next_k, self.plan, self.table)
+            if terms is not None and self.total is None:
+                self.total, self.wsum = terms
+            elif terms is not None:
+                self.total += terms[0]
+                self.wsum += terms[1]
+            self.ready.discard(self.next_k)
+            self.next_k += 1
+        self.seconds += time.perf_counter() - t0
+
+    def result(self):
+        if self.next_k != self.plan.inputs.samples:
+            raise PovlensError(f"{self.outdir}: sample {self.next_k} never came back")
+        return None if self.total is None else (self.total, self.wsum)
+
+
+def _collect(client, futures, outdir: Path, shared: bool, on_sample, bar,
+             sums: _Sums) -> list[dict]:
+    """Write each sample's files as it comes back and add it to ``sums``; returns the
+    results' timings."""
     from distributed import as_completed
     samples = outdir / "samples"
     tasks = []
@@ -134,6 +168,7 @@ def _collect(client, futures, outdir: Path, shared: bool, on_sample, bar) -> lis
                                    ": do the workers see this folder at the same path?"
                                    if shared else ""),
                                "leave out 'shared_dir'" if shared else None)
+        sums.add(k)
         tasks.append({"k": k, "host": res["host"], "pid": res["pid"],
                       "arrived_s": time.perf_counter() - t0,
                       "result_bytes": sum(len(d) for d in res["files"].values()),
@@ -215,22 +250,28 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
             stats["bundle_bytes"] = len(job["bundle"] or b"")
             futures = _submit(client, job, todo, worker_wait_s)
             stats["scatter_s"] = time.perf_counter() - t0 - stats["connect_s"]
-            stats["workers"] = len(client.scheduler_info(n_workers=-1)["workers"])
+            stats["workers"] = len(client.nthreads())
             exposure_for(outdir, plan, lens, table)      # while the workers render
+            sums = _Sums(outdir, plan, table)
+            for k in sorted(set(range(plan.inputs.samples)) - set(todo)):
+                sums.add(k)                              # rendered before: resumed
             with tqdm(total=len(todo), desc="lens samples", unit="sample", file=sys.stderr,
                       disable=quiet or not sys.stderr.isatty()) as bar:
                 stats["tasks"] = _collect(client, futures, outdir, shared_dir, on_sample,
-                                          bar)
+                                          bar, sums)
+            stats["composite_during_s"] = sums.seconds
         finally:
             if futures:
                 client.cancel(futures)
             if owned:
                 client.close()
+    mark_batches_done(outdir, plan)
+    t1 = time.perf_counter()
+    composite_outdir(outdir, sums=sums.result() if todo else None)
+    stats["composite_after_s"] = time.perf_counter() - t1
     stats["wall_s"] = time.perf_counter() - t0
     if todo:
         write_text(outdir / "samples" / "cluster.timing.json", json.dumps(stats) + "\n")
-    mark_batches_done(outdir, plan)
-    composite_outdir(outdir)
     return outdir / "image.exr", stats
 
 

@@ -29,7 +29,7 @@ from povlens.lens.prescription import AIR, LensPrescription
 from povlens.lens.tracer import trace_from_film
 
 __all__ = ["LINE_F_NM", "LINE_D_NM", "LINE_C_NM", "BAND_NM", "cauchy_coefficients", "index_at",
-           "has_abbe_numbers", "disperses", "lens_at_wavelength", "chromatic_aberration",
+           "has_abbe_numbers", "disperses", "lens_at_wavelength", "chief_landing_mm", "chromatic_aberration",
            "pass_radius_mm"]
 
 #: Fraunhofer lines (nm): hydrogen F, helium d, hydrogen C.
@@ -113,6 +113,41 @@ def _chief_heights(lens, film_distance_mm, object_distance_mm, radii_mm):
     return np.where(ok, h, np.nan)
 
 
+def chief_landing_mm(lens: LensPrescription, film_distance_mm: float,
+                     object_distance_mm: float, film_radius_mm, wavelengths_nm) -> np.ndarray:
+    """Where the object points seen by d-line chief rays land at other wavelengths.
+
+    The d-line chief ray from film radius r (r, 0, 0) meets the object plane
+    (``object_distance_mm`` from the film; inf: its direction) at height h; the
+    chief ray of wavelength lambda meeting it at h lands at film radius r(lambda),
+    found on a grid of 241 film radii up to 1.2 max(r), interpolated.
+
+    Parameters
+    ----------
+    film_radius_mm : (n,) d-line film radii, mm; wavelengths_nm : (m,) nm.
+
+    Returns
+    -------
+    (m, n) float64 film radii, mm; NaN where a chief ray is blocked or leaves the grid.
+    """
+    r_d = np.atleast_1d(np.asarray(film_radius_mm, dtype=np.float64))
+    h = _chief_heights(lens, film_distance_mm, object_distance_mm, r_d)
+    grid = np.linspace(0.0, 1.2 * max(float(np.max(r_d)), 1e-6), 241)
+    out = np.full((len(wavelengths_nm), r_d.size), np.nan)
+    for i, lam in enumerate(wavelengths_nm):
+        hg = _chief_heights(lens_at_wavelength(lens, float(lam)), film_distance_mm,
+                            object_distance_mm, grid)
+        ok = np.isfinite(hg)
+        if ok.sum() < 2:
+            continue
+        g, hv = grid[ok], hg[ok]
+        order = np.argsort(hv)
+        inside = np.isfinite(h) & (h >= hv.min()) & (h <= hv.max())
+        r = np.interp(np.where(inside, h, hv.min()), hv[order], g[order])
+        out[i] = np.where(inside, r, np.nan)
+    return out
+
+
 def chromatic_aberration(lens: LensPrescription, film_distance_mm: float,
                          object_distance_mm: float, film_half_diagonal_mm: float,
                          pixel_pitch_mm: float, n_field: int = 6) -> dict:
@@ -142,20 +177,9 @@ def chromatic_aberration(lens: LensPrescription, film_distance_mm: float,
         ``longitudinal_blur_px``, ``lines_nm`` {F, d, C}.
     """
     frac = np.linspace(0.0, 1.0, int(n_field))
-    r_d = frac * film_half_diagonal_mm
-    h = _chief_heights(lens, film_distance_mm, object_distance_mm, r_d)
-    grid = np.linspace(0.0, 1.2 * film_half_diagonal_mm, 241)
-    landing = {}
-    for name, lam in (("F", LINE_F_NM), ("C", LINE_C_NM)):
-        hg = _chief_heights(lens_at_wavelength(lens, lam), film_distance_mm,
-                            object_distance_mm, grid)
-        ok = np.isfinite(hg)
-        g, hv = grid[ok], hg[ok]
-        order = np.argsort(hv)           # heights fall as r grows (the image is inverted)
-        inside = (h >= hv.min()) & (h <= hv.max()) if hv.size > 1 else np.zeros_like(frac, bool)
-        r = np.interp(np.where(np.isfinite(h), h, 0.0), hv[order], g[order]) if hv.size > 1 \
-            else np.zeros_like(frac)
-        landing[name] = np.where(inside & np.isfinite(h), r, np.nan)
+    r_f, r_c = chief_landing_mm(lens, film_distance_mm, object_distance_mm,
+                                frac * film_half_diagonal_mm, (LINE_F_NM, LINE_C_NM))
+    landing = {"F": r_f, "C": r_c}
     lateral_px = (landing["F"] - landing["C"]) / pixel_pitch_mm
     front = object_distance_mm - film_distance_mm - lens.total_track_mm   # from front vertex
     z = {name: image_of_object(lens_at_wavelength(lens, lam), front)[0]

@@ -31,6 +31,7 @@ import numpy as np
 
 from povlens.lens.film import Film
 from povlens.plan.adaptive import adaptive_rows
+from povlens.plan.aperture import AUTO_NOTE, PINHOLE_NOTE, describe
 from povlens.plan.decision import decide, model_depths, probe_image_error, pupil_cut
 from povlens.plan.depth_probe import DepthProbe, ProbeView, axial_depth, depth_limits, start_probe
 from povlens.plan.fixed import run_in_background, start_plan
@@ -165,7 +166,12 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     d = decide(near_z_mm=near_z, far_z_mm=far_z, model=model, model_error=err,
                pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.tolerance_px,
                vignetting=opts.vignetting, image_error=image_error,
-               catseye=pupil_cut(profile), field_meshes=opts.ray_mesh == "field")
+               catseye=pupil_cut(profile), field_meshes=opts.ray_mesh == "field",
+               aperture_shape=(describe(lens.aperture_shape) if lens.aperture_shape is not None
+                               else None))
+    if lens.aperture_shape is not None:
+        d.add_remark((AUTO_NOTE if d.method == "mesh" else PINHOLE_NOTE).format(
+            what=describe(lens.aperture_shape)))
     d.numbers["depth_probe"] = info
     if opts.vignetting:     # the render of a view applies this profile (rendering/vignetting)
         d.numbers["illumination_profile"] = profile_record(profile, table)

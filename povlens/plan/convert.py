@@ -24,6 +24,7 @@ from povlens.plan.adaptive import adaptive_rows, apply_to_plan, limit_samples, r
 from povlens.plan.auto import choose_method, measure_depth_map, start_depth_probe
 from povlens.plan.autofocus import pinhole_focus_note, resolve_focus
 from povlens.plan.depth_probe import atmosphere_note, depth_limits, probe_record
+from povlens.plan.dispersion_plan import colour_decision
 from povlens.plan.fixed import (PlanStart, finish_plan, make_plan, make_plan_with_lens,
                                 run_in_background, start_plan)
 from povlens.plan.options import METHODS, ConvertOptions, with_povray_options_checked
@@ -111,6 +112,7 @@ def _choose_automatically(opts: ConvertOptions, render_early, cleanup: contextli
         cleanup.callback(view.cancel)
     decision, adaptive = choose_method(base, plan0, plan0.thin_lens, start.lens, plan0.film,
                                        probe=probe, pupil_table=table)
+    decision = colour_decision(opts, start.lens, plan0, decision)    # --dispersion
     choice = _AutoChoice(opts, opts, start, reuse, decision, adaptive, early, view)
     _settle_speculation(choice, guess)
     samples = decision.samples if opts.auto_samples else opts.samples

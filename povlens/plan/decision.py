@@ -271,10 +271,18 @@ def _numbers(near_z_mm, far_z_mm, model, e: dict, blur: dict, tol: float, vignet
     }
 
 
+def _aperture_shape_check(aperture_shape: str | None, reasons: list, fb: list) -> None:
+    """A shaped stop rules focal_blur out (it samples a round aperture only)."""
+    if aperture_shape:
+        reasons.append(f"focal-blur: cannot draw the aperture shape ({aperture_shape}); "
+                       f"the blur is visible")
+        fb.append(False)
+
+
 def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
            pixel_pitch_mm: float, tolerance_px: float = 0.5, vignetting: bool = True,
            image_error: dict | None = None, catseye: dict | None = None,
-           field_meshes: bool = False) -> Decision:
+           field_meshes: bool = False, aperture_shape: str | None = None) -> Decision:
     """Choose the render method and its lens samples (pure; see the module docstring).
 
     Parameters
@@ -297,6 +305,9 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     field_meshes : a mesh render would use field meshes (one pupil point per sample
         for the whole frame): its sample count is :data:`FIELD_MESH_SAMPLE_FACTOR`
         times the rule's, capped at :data:`MAX_SAMPLES`.
+    aperture_shape : a few words on a shaped stop (iris, mask;
+        :func:`povlens.plan.aperture.describe`), which focal_blur cannot draw: with a
+        visible blur the render is mesh.
 
     Returns
     -------
@@ -353,6 +364,7 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
           check("focal-blur: max blur shape error / 2 (the long axis reaches beyond the "
                 "disc by half on each side)", shape_err / 2, tol)]
     reasons.append("focal-blur: " + vig_text)
+    _aperture_shape_check(aperture_shape, reasons, fb)
     floor_share = 0.0
     if (image_error is not None and vignetting and image_error.get("shift_rmse", 0) > 0
             and "catseye_rmse" in image_error):
@@ -380,6 +392,8 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
         return Decision("focal-blur", fbs.max_samples, reasons, numbers, focal_blur=fbs)
     why = ("the cat's eye of out-of-focus light, which the vignetting map cannot carry, "
            "is beyond the budget" if all(fb) else
+           f"focal_blur cannot draw the aperture shape ({aperture_shape}) and the blur is "
+           f"visible" if aperture_shape and all(fb[:-1]) and not catseye_bad else
            "the real lens deviates from the equivalent thin lens beyond the budget")
     reasons.append(f"-> mesh: {why}; {mesh_samples} samples for a {b_max:.3g} px blur "
                    f"({SAMPLE_RULE}{field_text})")

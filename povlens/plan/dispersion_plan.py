@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import dataclasses
 
-from povlens.lens.dispersion import (BAND_NM, chromatic_aberration, has_abbe_numbers,
-                                     lens_at_wavelength, pass_radius_mm)
+from povlens.lens.dispersion import (BAND_NM, chromatic_aberration, disperses,
+                                     has_abbe_numbers, lens_at_wavelength, pass_radius_mm)
+from povlens.plan.decision import MIN_SAMPLES
 from povlens.pupil.field import DISC_MARGIN
 
-__all__ = ["apply_dispersion", "disc_radius_mm", "COLOUR_MODEL"]
+__all__ = ["apply_dispersion", "colour_decision", "disc_radius_mm", "COLOUR_MODEL"]
 
 #: How the samples' wavelengths become RGB (plan.json; povlens.rendering.spectral).
 COLOUR_MODEL = ("Cauchy n = A + B/lambda^2 through n_d and n_F - n_C = (n_d - 1)/V_d; "
@@ -83,3 +84,40 @@ def apply_dispersion(opts, plan, lens, table) -> None:
     info.update(rendered=True, pupil_disc_radius_d_line_mm=fm.pupil_disc_radius_mm)
     plan.field_mesh = dataclasses.replace(fm, pupil_disc_radius_mm=radius)
     plan.inputs = dataclasses.replace(plan.inputs, dispersion=True)
+
+
+def colour_decision(opts, lens, plan, decision):
+    """``--method auto --dispersion``: the decision, or mesh when it chose a view (which
+    renders no colour) and the lens's colour reaches ``--tolerance``.
+
+    Parameters
+    ----------
+    opts : the options (method auto); lens : the stopped-down lens; plan : auto's
+        mesh plan (its focus and film); decision : :func:`povlens.plan.auto.choose_method`'s.
+
+    Returns
+    -------
+    Decision
+        ``decision`` itself, or a mesh decision of at least twice
+        :data:`~povlens.plan.decision.MIN_SAMPLES` samples (each colour channel draws on
+        about a third of a spectral render's samples) with the reason.
+    """
+    if not opts.dispersion or decision.method == "mesh" or not disperses(lens):
+        return decision
+    film, focus = plan.film, plan.focus
+    ca = chromatic_aberration(lens, focus.film_distance_mm, focus.object_distance_from_film_mm,
+                              film.half_diagonal_mm, film.pixel_pitch_mm)
+    colour_px = max(ca["max_lateral_colour_px"], ca["longitudinal_blur_px"] or 0.0)
+    if colour_px < opts.tolerance_px:
+        decision.add_remark(f"--dispersion: the lens's colour ({colour_px:.2g} px) is within "
+                            f"the tolerance; the {decision.method} view renders none")
+        return decision
+    samples = max(2 * MIN_SAMPLES, decision.samples if decision.method == "mesh" else 0)
+    return dataclasses.replace(
+        decision, method="mesh", samples=samples, focal_blur=None,
+        reasons=decision.reasons + [
+            f"-> mesh: --dispersion, and the lens's colour (lateral {ca['max_lateral_colour_px']:.2g}"
+            f" px, longitudinal blur {ca['longitudinal_blur_px'] or 0.0:.2g} px) exceeds the "
+            f"tolerance {opts.tolerance_px:g} px, which only lens samples render "
+            f"({decision.method} was chosen without colour)"],
+        numbers=dict(decision.numbers, colour_px=colour_px))

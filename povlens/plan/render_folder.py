@@ -101,13 +101,19 @@ def _makefile(plan: Plan) -> str:
         povlens=f"{shlex.quote(sys.executable)} -m povlens", rules=rules)
 
 
+def _iris_domain(plan: Plan):
+    """The field samples' iris pupil domain (it moves every sample's pupil point)."""
+    fm = plan.field_mesh
+    return None if fm is None else (fm.iris_domain_radius_mm, fm.iris_flip)
+
+
 def stale_samples(old: Plan, new: Plan) -> list[int] | None:
     """Samples of the old plan that the new plan cannot reuse: ``None`` = all (an
     input that changes every sample differs), else those whose rows changed or
     that the new plan no longer has."""
     oi = {k: v for k, v in old.inputs.to_dict().items() if k not in SAMPLE_INDEPENDENT_INPUTS}
     ni = {k: v for k, v in new.inputs.to_dict().items() if k not in SAMPLE_INDEPENDENT_INPUTS}
-    if oi != ni:
+    if oi != ni or _iris_domain(old) != _iris_domain(new):
         return None
     n_old, n_new = int(old.inputs.samples), int(new.inputs.samples)
     return [k for k in range(n_old)

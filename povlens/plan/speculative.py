@@ -95,6 +95,10 @@ def early_guess(opts: ConvertOptions, plan0: Plan) -> str:
     """
     if lens_rules_out_views(opts, plan0):
         return "mesh"
+    e = plan0.model_error      # a shaped stop: focal_blur is out wherever blur shows
+    if ((getattr(opts, "aperture_blades", None) or getattr(opts, "aperture_image", None))
+            and np.size(e["blur_model_px"]) and np.max(e["blur_model_px"]) >= opts.tolerance_px):
+        return "mesh"
     if vignetting_may_choose_mesh(opts, plan0):
         return "either"
     return "views"

@@ -32,14 +32,15 @@ def accumulate_samples(
     (a generator computing each sample's weights when it is reached).
     ``channel_weights`` (with ``weight_arrays``): K arrays (3,) multiplying sample
     k's weights per colour channel, f_kc (spectral samples,
-    :mod:`povlens.rendering.spectral`); the sums are then per channel.
+    :mod:`povlens.rendering.spectral`); the sums are then per channel, and the
+    plain ``sum_k w_k`` follows as a 4th.
 
     Returns
     -------
     total : (H, W, C) float64, ``sum_k w_k I_k`` (or ``sum_k I_k`` without weights;
         channels 0..2 ``sum_k f_kc w_k I_kc`` with channel weights).
-    weight_sum : (H, W) float64 ``sum_k w_k`` ((H, W, 3) ``sum_k f_kc w_k`` with
-        channel weights), or None without weights.
+    weight_sum : (H, W) float64 ``sum_k w_k`` ((H, W, 4) ``sum_k f_kc w_k`` and
+        ``sum_k w_k`` with channel weights), or None without weights.
     """
     paths = list(sample_paths)
     if not paths:
@@ -64,7 +65,7 @@ def accumulate_samples(
             shape = img.shape
             total = np.zeros(shape, dtype=np.float64)
             if weights is not None:
-                wsum = np.zeros(shape[:2] + ((3,) if channel_weights is not None else ()),
+                wsum = np.zeros(shape[:2] + ((4,) if channel_weights is not None else ()),
                                 dtype=np.float64)
         elif img.shape != shape:
             raise PovlensError(
@@ -90,7 +91,8 @@ def accumulate_samples(
             wc = w[:, :, None] * np.asarray(channel_weights[k], dtype=np.float64)[None, None, :3]
             total[..., :3] += wc * img[..., :3]
             total[..., 3:] += w[:, :, None] * img[..., 3:]
-            wsum += wc
+            wsum[..., :3] += wc
+            wsum[..., 3] += w
             continue
         total += w[:, :, None] * img
         wsum += w

@@ -75,7 +75,8 @@ from povlens.lens.prescription import read_lens
 __all__ = ["convert_and_render", "render_samples", "render_batch", "sample_rows", "sample_weight",
            "samples_per_pixel", "render_view", "composite_outdir", "render_outdir",
            "pupil_table_for", "lens_for", "exposure_for", "film_row_args", "EarlyRender",
-           "POVRAY_IN_FLIGHT", "MESH_SWITCHES", "sample_done", "mark_batches_done"]
+           "POVRAY_IN_FLIGHT", "MESH_SWITCHES", "sample_done", "mark_batches_done",
+           "sample_sums"]
 
 
 def lens_for(plan: Plan):
@@ -456,7 +457,7 @@ def _finish_image(outdir: Path, image: np.ndarray) -> None:
 
 
 def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
-                     write: bool = True) -> np.ndarray:
+                     write: bool = True, sums=None) -> np.ndarray:
     """Combine the rendered samples of a mesh plan into image.exr and image.png.
 
     With ``vignetting`` (the plan's setting when None) the image is the camera
@@ -464,7 +465,9 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
     lens makes it.  Without, each pixel is divided by its own mean weight
     (``sum w I / sum w``), which removes natural and mechanical vignetting and
     leaves the lens's geometry and blur: comparable with POV-Ray's cameras.
-    Returns the (H, W, 3) float64 image; ``write=False`` only returns it.
+    Returns the (H, W, 3) float64 image; ``write=False`` only returns it.  ``sums``:
+    the sums over the rendered samples, added in sample order by the caller as they
+    came (:func:`sample_sums`; :mod:`povlens.cluster`), instead of reading them here.
     """
     outdir = Path(outdir)
     plan = read_plan(outdir)
@@ -492,12 +495,12 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
         # sum w I / sum w, in float64, one sample in memory at a time (composite.py);
         # times sum w / N_p for the measurement
         spectral = plan_channel_factors(plan)    # --dispersion: per-channel weights
-        total, wsum = accumulate_samples(
+        total, wsum = sums if sums is not None else accumulate_samples(
             paths, (sample_weight(outdir, k, plan, table) for k in rendered),
             drop_top_rows=drop, drop_right_columns=plan.povray.drop_right_columns,
-            channel_weights=None if spectral is None else spectral[0][rendered])
+            channel_weights=None if spectral is None else spectral[rendered])
         if spectral is not None:
-            image = spectral_image(total, wsum, spectral[1], exposure if vignetting else None)
+            image = spectral_image(total, wsum, n_p, exposure if vignetting else None)
         else:
             image = np.zeros(total.shape[:2] + (3,))
             nz = wsum > 0
@@ -514,14 +517,26 @@ def _progress(total: int, desc: str, quiet: bool):
                 file=sys.stderr)
 
 
+def sample_sums(outdir: str | os.PathLike, k: int, plan: Plan, table):
+    """Sample k's terms of :func:`composite_outdir`'s sums (float64 ``w_k I_k``, ``w_k``),
+    None if blocked; added in sample order they are its sums bit for bit."""
+    outdir = Path(outdir)
+    if _blocked_path(outdir, k).exists():
+        return None
+    spectral = plan_channel_factors(plan)
+    return accumulate_samples(
+        [_sample_paths(outdir, k)[0]], [sample_weight(outdir, k, plan, table)],
+        drop_top_rows=plan.povray.drop_top_rows,
+        drop_right_columns=plan.povray.drop_right_columns,
+        channel_weights=None if spectral is None else spectral[[k]])
+
+
 def sample_done(outdir: str | os.PathLike, k: int) -> bool:
-    """Whether lens sample k of a mesh folder is rendered (a resumed render skips it);
-    :mod:`povlens.cluster` renders the others on a Dask cluster."""
+    """Whether lens sample k of a mesh folder is rendered (a resumed render skips it)."""
     return _sample_done(Path(outdir), k)
 
 
 def mark_batches_done(outdir: str | os.PathLike, plan: Plan) -> None:
-    """Write ``batch_BBB.done`` (make's target) for each batch whose samples are done."""
     _mark_batches_done(Path(outdir), plan)
 
 

@@ -21,7 +21,7 @@ keep the first ones' wavelengths), rotated by the plan's seed, and
 lambda_k = P^-1(u_k).  Sample k's channel factors are f_kc = w_c(lambda_k) /
 p(lambda_k) divided by their mean over the plan's samples, so that a grey scene
 composites to exactly its grey and the exposure matches the render without
-dispersion (:func:`channel_factors`).
+dispersion (:func:`channel_factors`, :func:`spectral_image`).
 """
 
 from __future__ import annotations
@@ -33,8 +33,11 @@ import numpy as np
 from povlens.errors import PovlensError
 from povlens.lens.dispersion import BAND_NM
 
-__all__ = ["colour_weights", "sample_wavelength_nm", "channel_factors", "row_factor_sums",
+__all__ = ["colour_weights", "sample_wavelength_nm", "channel_factors",
            "plan_channel_factors", "spectral_image", "CMF_SOURCE"]
+
+#: Share of every channel each sample keeps whatever its wavelength (channel_factors).
+FACTOR_FLOOR = 0.01
 
 #: What the colour weights are made of (recorded in plan.json).
 CMF_SOURCE = ("CIE 1931 2-degree colour-matching functions (colour-science) to linear sRGB, "
@@ -93,40 +96,35 @@ def channel_factors(n_samples: int, seed: int = 0) -> np.ndarray:
     lam = sample_wavelength_nm(np.arange(int(n_samples)), seed)
     w = colour_weights(lam)
     f = w / np.maximum(w.mean(axis=1, keepdims=True), 1e-300)    # w_c / p at lambda_k
-    return f / np.maximum(f.mean(axis=0, keepdims=True), 1e-300)
+    f = f / np.maximum(f.mean(axis=0, keepdims=True), 1e-300)
+    # every sample keeps FACTOR_FLOOR of each channel: a pixel that only samples of
+    # other colours reach gets their light, not black (fringes 1 % less saturated)
+    return (1.0 - FACTOR_FLOOR) * f + FACTOR_FLOOR
 
 
-def row_factor_sums(factors: np.ndarray, rows: list[tuple[int, int]], height: int) -> np.ndarray:
-    """(height, 3) sum of f_kc over the samples whose rows [r0, r1) cover each film row
-    (what replaces the sample count N_p of a pixel in the composite)."""
-    out = np.zeros((int(height), 3), dtype=np.float64)
-    for f, (r0, r1) in zip(factors, rows):
-        out[r0:r1] += f
-    return out
-
-
-def plan_channel_factors(plan) -> tuple[np.ndarray, np.ndarray] | None:
-    """A dispersion plan's (n, 3) channel factors of its samples and their (H, 3) sums
-    over the samples covering each film row; None for a plan without dispersion."""
+def plan_channel_factors(plan) -> np.ndarray | None:
+    """A dispersion plan's (n, 3) channel factors of its samples (None without)."""
     if not plan.inputs.dispersion:
         return None
-    n = int(plan.inputs.samples)
-    f = channel_factors(n, plan.inputs.seed)
-    rows = [plan.rows_of_sample(k) for k in range(n)]
-    return f, row_factor_sums(f, rows, plan.film.height_px)
+    return channel_factors(int(plan.inputs.samples), plan.inputs.seed)
 
 
-def spectral_image(total: np.ndarray, wsum: np.ndarray, row_sums: np.ndarray,
+def spectral_image(total: np.ndarray, wsum: np.ndarray, samples_per_row: np.ndarray,
                    exposure: float | None) -> np.ndarray:
-    """(H, W, 3) composite of per-channel sums (:func:`~povlens.rendering.composite.
-    accumulate_samples` with channel weights): ``sum f w I / sum f w`` without
-    vignetting (``exposure`` None), else ``exposure * sum f w I / sum_k f_kc``
-    (``row_sums`` (H, 3)), the measurement with the lens's vignetting."""
-    t = total[..., :3]
+    """(H, W, 3) composite of spectral sums (:func:`~povlens.rendering.composite.
+    accumulate_samples` with channel weights: ``wsum`` (H, W, 4)).
+
+    Each channel is the colour-weighted mean ``sum_k f_kc w_k I_kc / sum_k f_kc w_k``;
+    with vignetting (``exposure`` not None) times the plain measurement's
+    ``exposure * sum_k w_k / N_p`` (``samples_per_row`` (H,) N_p), as without
+    dispersion.  So a grey scene stays exactly grey at any sample count and the
+    exposure is the non-dispersive render's; the lens's vignetting is taken
+    achromatic (its change across the band is not rendered).
+    """
+    t, wc, w = total[..., :3], wsum[..., :3], wsum[..., 3]
     image = np.zeros(t.shape)
-    if exposure is None:
-        nz = wsum > 0
-        image[nz] = t[nz] / wsum[nz]
-        return image
-    rs = row_sums[:, None, :]
-    return np.where(rs > 0, exposure * t / np.where(rs > 0, rs, 1.0), 0.0)
+    nz = wc > 0
+    image[nz] = t[nz] / wc[nz]
+    if exposure is not None:
+        image *= (w * exposure / np.maximum(samples_per_row, 1)[:, None])[..., None]
+    return image

@@ -122,6 +122,19 @@ def _missing(what: str, why: str = "not rendered") -> str:
     return f'<div class="missing">{_esc(what)}: {_esc(why)}</div>'
 
 
+def _colour_line(d: dict | None, rendered: bool) -> str:
+    """The lens's chromatic aberration (plan.json ``dispersion``, F against C line):
+    one line and a small table of the lateral colour across the field; "" without."""
+    if not d:
+        return ""
+    lat = [["lateral colour (px)"] + [_num(v, ".3g") for v in d["lateral_colour_px"]]]
+    return (f"<p>colour (--dispersion, {'rendered' if rendered else 'not rendered'}): "
+            f"lateral up to {_num(d['max_lateral_colour_px'], '.3g')} px, longitudinal "
+            f"{_num(d['longitudinal_colour_mm'], '.3g')} mm (blur "
+            f"{_num(d['longitudinal_blur_px'], '.3g')} px)</p>"
+            + _table(["field"] + [f"{f:.2g}" for f in d["field_fraction"]], lat))
+
+
 def _table(header: list[str], rows: list[list[str]]) -> str:
     h = "".join(f"<th>{_esc(x)}</th>" for x in header)
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
@@ -532,6 +545,7 @@ class _Folder:
                      f"distribution 3), rays within {fm.max_ray_error_px:.3f} px of the exact "
                      f"ones (measured over {fm.pupil_points} pupil points; limit "
                      f"{fm.limit_px:g} px)</p>")
+        head += _colour_line(self.plan.dispersion, bool(inp.dispersion))
         parts = [self.lens_section(), self.pupil_section()]
         renders, pinhole = self.renders_section()
         parts += [self.focus_section(pinhole), renders, self._times(),

@@ -25,14 +25,14 @@ from povlens.cli import main                                      # noqa: E402
 from povlens.cluster import bundle as bundle_module               # noqa: E402
 from povlens.cluster.bundle import make_bundle                    # noqa: E402
 from povlens.cluster.render import render_outdir_on_cluster       # noqa: E402
-from povlens.errors import ParameterError, PovrayError            # noqa: E402
+from povlens.errors import ParameterError, PovlensError, PovrayError  # noqa: E402
 from povlens.plan.schema import read_plan                         # noqa: E402
 from povlens.util.images import read_image, write_png_srgb        # noqa: E402
 
 from conftest import ROOT                                         # noqa: E402
 
 SCENE = ROOT / "scenes" / "paper.pov"
-RENDER = dict(lens="dgauss.50mm", focus=4, method="mesh", samples=8, width=80, height=60)
+RENDER = dict(lens="dgauss.50mm", focus=4, method="mesh", samples=6, width=80, height=60)
 START_TIMEOUT_S = 60
 
 
@@ -123,7 +123,7 @@ def test_the_cli_renders_on_the_cluster_from_the_environment(cluster, local_imag
     monkeypatch.setenv("POVLENS_SCHEDULER", cluster.address)
     out = tmp_path / "o"
     args = ["render", str(SCENE), "--lens", "dgauss.50mm", "--focus", "4", "--method", "mesh",
-            "--samples", "8", "--width", "80", "--height", "60", "-q", "-o", str(out)]
+            "--samples", "6", "--width", "80", "--height", "60", "-q", "-o", str(out)]
     assert main(args) == 0
     assert (out / "samples" / "cluster.timing.json").exists()
     assert np.array_equal(read_image(out / "image.exr"), local_image)
@@ -208,15 +208,34 @@ def test_an_interrupted_cluster_render_resumes_here(cluster, local_image, tmp_pa
         render_outdir_on_cluster(out, cluster.address, on_sample=interrupt)
     assert len(list((out / "samples").glob("sample_*.exr"))) == 3
     result = povlens.render(SCENE, outdir=out, **RENDER)         # locally, resumed
-    assert json.loads((out / "samples" / "render.timing.json").read_text())["samples"] == 5
+    assert json.loads((out / "samples" / "render.timing.json").read_text())["samples"] == 3
     assert np.array_equal(read_image(result.image_exr), local_image)
 
 
-def test_shared_dir_writes_the_samples_in_place(cluster, local_image, tmp_path):
+def test_shared_dir_writes_the_samples_in_place_through_a_client(cluster, local_image,
+                                                                 tmp_path):
+    from distributed import Client
     out = tmp_path / "o"
-    povlens.render(SCENE, outdir=out, scheduler=cluster.address, shared_dir=True, **RENDER)
+    with Client(cluster.address, timeout="30s", set_as_default=False) as client:
+        povlens.render(SCENE, outdir=out, scheduler=client, shared_dir=True, **RENDER)
+        assert client.status == "running"                # the caller's client: left open
     assert _timing(out)["bundle_bytes"] == 0
     assert np.array_equal(read_image(out / "image.exr"), local_image)
+
+
+def test_a_scheduler_without_workers_is_a_clear_error(tmp_path):
+    from distributed import Client
+    empty = Cluster(tmp_path)
+    try:
+        with Client(empty.address, timeout=f"{START_TIMEOUT_S}s", set_as_default=False):
+            pass                                          # it answers
+        out = tmp_path / "o"
+        povlens.convert(SCENE, outdir=out, lens="dgauss.50mm", focus=4, method="mesh",
+                        samples=2, width=32, height=24)
+        with pytest.raises(PovlensError, match="no Dask worker joined the scheduler"):
+            render_outdir_on_cluster(out, empty.address, worker_wait_s=1)
+    finally:
+        empty.stop()
 
 
 def test_a_scene_failing_on_the_workers_is_a_povray_error(cluster, tmp_path):
@@ -293,3 +312,12 @@ def test_parsing_render_imports_no_dask():
                        timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_a_dispersion_render_on_the_cluster_equals_the_local_one(cluster, tmp_path):
+    # the composite's sums come from rendering/samples.sample_sums: spectral weights too
+    opts = dict(lens="dgauss.50mm", focus=4, method="mesh", samples=4, width=48, height=36,
+                dispersion=True)
+    local = povlens.render(SCENE, outdir=tmp_path / "local", **opts)
+    dist = povlens.render(SCENE, outdir=tmp_path / "dist", scheduler=cluster.address, **opts)
+    assert np.array_equal(read_image(local.image_exr), read_image(dist.image_exr))

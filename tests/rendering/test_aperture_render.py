@@ -1,0 +1,260 @@
+"""Shaped apertures end to end: options, plan.json, the planner, the field samples' pupil
+domain and weights, real POV-Ray renders of a far highlight, and the CLI's errors."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from povlens.cli import main
+from povlens.lens import reference_tracer
+from povlens.lens.aperture_shape import ApertureShape, shaped_lens
+from povlens.lens.film import Film
+from povlens.lens.focus import focus
+from povlens.lens.prescription import read_lens
+from povlens.lens.tracer import trace_from_film
+from povlens.plan.aperture import describe
+from povlens.plan.decision import decide
+from povlens.plan.schema import read_plan
+from povlens.pupil.aperture_domain import iris_domain, iris_point_mm, iris_scale
+from povlens.pupil.build import build_pupil_table
+from povlens.pupil.field import bounding_disc_radius_mm, concentric_disc_mm
+from povlens.pupil.field_mask import field_transmission
+from povlens.rendering.samples import lens_for
+from povlens.util.images import read_image, write_png_srgb
+
+BOKEH = """#version 3.7;
+global_settings { assumed_gamma 1.0 }
+camera { perspective location <0, 0, 0> look_at <0, 0, 1> right x up y }
+background { rgb 0 }
+sphere { <0, 0, 10>, 0.12 pigment { rgb 1 } finish { emission 1 diffuse 0 ambient 0 } }
+"""
+
+
+def _ring_mask(path, n=64, inner=0.55):
+    c = (np.arange(n) + 0.5) / n * 2 - 1
+    x, y = np.meshgrid(c, c)
+    r = np.hypot(x, y)
+    m = ((r > inner) & (r < 1.0)).astype(np.float32)
+    # write_png_srgb encodes linear light; the mask is read as stored (0 and 1 stay)
+    write_png_srgb(path, np.repeat(m[..., None], 3, axis=2))
+    return path
+
+
+def _render(tmp_path, name, *extra, samples=32):
+    scene = tmp_path / "bokeh.pov"
+    scene.write_text(BOKEH)
+    out = tmp_path / name
+    rc = main(["render", str(scene), "--lens", "dgauss.50mm", "--focus", "0.25",
+               "--method", "mesh", "--samples", str(samples), "--width", "64", "--height", "64",
+               "-q", "-o", str(out), *extra])
+    assert rc == 0
+    return read_image(out / "image.exr")[..., 0].astype(float), out
+
+
+def _radial_energy(img):
+    """Energy-weighted radii of the highlight about its centroid (pixels) and weights."""
+    y, x = np.nonzero(img > 0)
+    w = img[y, x]
+    cx, cy = np.average(x, weights=w), np.average(y, weights=w)
+    return np.hypot(x - cx, y - cy), w
+
+
+@pytest.fixture(scope="module")
+def renders(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("aperture")
+    round_img, _ = _render(tmp, "round")
+    hex_img, hex_out = _render(tmp, "hex", "--aperture-blades", "6", "--blade-rotation", "10")
+    ring_img, ring_out = _render(tmp, "ring", "--aperture-image",
+                                 str(_ring_mask(tmp / "ring.png")))
+    return {"round": round_img, "hex": (hex_img, hex_out), "ring": (ring_img, ring_out),
+            "tmp": tmp}
+
+
+def test_renders_keep_the_light_and_the_mask_makes_a_ring(renders):
+    round_img = renders["round"]
+    hex_img, _ = renders["hex"]
+    ring_img, _ = renders["ring"]
+    # the highlight's light is the same through any stop once the exposure puts the frame
+    # centre at the pinhole's brightness (within the noise of 32 samples, about 5 % each;
+    # test_iris_domain_weights_are_unbiased checks the weights to 0.3 %)
+    e = round_img.sum()
+    assert hex_img.sum() == pytest.approx(e, rel=0.15)
+    assert ring_img.sum() == pytest.approx(e, rel=0.15)
+    # the ring mask leaves a hole: no light near the highlight's centre
+    r, w = _radial_energy(round_img)
+    r_edge = np.percentile(r, 97)
+    inner_round = w[r < 0.35 * r_edge].sum() / w.sum()
+    r2, w2 = _radial_energy(ring_img)
+    inner_ring = w2[r2 < 0.35 * r_edge].sum() / w2.sum()
+    assert inner_round > 0.05
+    assert inner_ring < 0.2 * inner_round
+    # the hexagon's highlight is smaller than the round one by the polygon's area
+    n_hex = (hex_img > 0).sum()
+    assert n_hex < (round_img > 0).sum()
+
+
+def test_plan_records_the_shape_and_lens_for_rebuilds_it(renders):
+    _, hex_out = renders["hex"]
+    plan = read_plan(hex_out / "plan.json")
+    inp = json.loads((hex_out / "plan.json").read_text())["inputs"]
+    assert inp["aperture_blades"] == 6 and inp["blade_rotation_deg"] == 10.0
+    assert "aperture_image" not in inp
+    lens = lens_for(plan)
+    assert lens.aperture_shape.blades == 6 and lens.aperture_shape.rotation_deg == 10.0
+    fm = plan.field_mesh
+    assert fm.iris_domain_radius_mm is not None
+    _, ring_out = renders["ring"]
+    ring_plan = read_plan(ring_out / "plan.json")
+    assert ring_plan.inputs.aperture_image_sha256
+    assert lens_for(ring_plan).aperture_shape.mask is not None
+    # a changed mask is refused (the samples' transmissions belong to the old one)
+    mask = ring_plan.inputs.aperture_image
+    old = open(mask, "rb").read()
+    try:
+        _ring_mask(mask, inner=0.3)
+        with pytest.raises(Exception, match="aperture mask .* changed"):
+            lens_for(ring_plan)
+    finally:
+        open(mask, "wb").write(old)
+
+
+def test_iris_domain_contains_every_passing_ray_and_is_tight():
+    lens0 = read_lens("dgauss.50mm")
+    fd = focus(lens0, 2000.0).exact_film_distance_mm
+    table = build_pupil_table(lens0, fd, 21.6)
+    RB = bounding_disc_radius_mm(table)
+    shape = ApertureShape(blades=6, rotation_deg=10)
+    lens = shaped_lens(lens0, shape)
+    RD, flip, _ = iris_domain(lens, fd, table)
+    rng = np.random.default_rng(5)
+    fractions = []
+    for r in (0.0, 5.1, 10.3, 16.9, 21.0):
+        phi = rng.uniform(0, 2 * math.pi)
+        f = np.array([r * math.cos(phi), r * math.sin(phi)])
+        P = concentric_disc_mm(rng.random((30000, 2)), RB)
+        o = np.zeros((len(P), 3))
+        o[:, :2] = f
+        ok = trace_from_film(lens, fd, o, np.c_[P - f, np.full(len(P), table.plane_z_mm)]).passed
+        gauge = np.hypot(P[ok, 0], P[ok, 1]) / iris_scale(shape, np.arctan2(P[ok, 1], P[ok, 0]),
+                                                          flip)
+        assert gauge.max() <= RD                       # conservative
+        if r == 0.0:
+            Q = np.array([iris_point_mm(shape, flip, RD, RB, p)[0]
+                          for p in concentric_disc_mm(rng.random((4000, 2)), 1.0)])
+            o2 = np.zeros((len(Q), 3))
+            fractions = [trace_from_film(lens, fd, o2, np.c_[Q, np.full(len(Q),
+                                                                          table.plane_z_mm)]
+                                         ).passed.mean(), ok.mean()]
+    # on the axis the polygon domain passes >= 95 %, the disc only about the area ratio
+    assert fractions[0] >= 0.95
+    assert fractions[1] < 0.85
+
+
+def test_iris_domain_weights_are_unbiased():
+    """E/L at the film centre from the polygon domain's points and weights (pi rho^2
+    cos^4 / z^2) against a dense grid over the plane."""
+    lens0 = read_lens("dgauss.50mm")
+    fd = focus(lens0, 2000.0).exact_film_distance_mm
+    table = build_pupil_table(lens0, fd, 21.6)
+    RB = bounding_disc_radius_mm(table)
+    shape = ApertureShape(blades=5, curvature=0.3)
+    lens = shaped_lens(lens0, shape)
+    RD, flip, _ = iris_domain(lens, fd, table)
+    zp = table.plane_z_mm
+
+    def passes(P):
+        o = np.zeros((len(P), 3))
+        d = np.c_[P, np.full(len(P), zp)]
+        c = zp / np.sqrt((d * d).sum(1))
+        return trace_from_film(lens, fd, o, d).passed, c ** 4 / zp ** 2
+
+    n = 1200
+    g = (np.arange(n) + 0.5) / n * 2 - 1
+    X, Y = np.meshgrid(g * RB, g * RB)
+    ok, f = passes(np.c_[X.ravel(), Y.ravel()])
+    exact = (ok * f).sum() * (2 * RB / n) ** 2
+    from povlens.pupil.sampling import sobol_points
+    u = np.asarray(sobol_points(1 << 14, 2, seed=1))
+    pts = [iris_point_mm(shape, flip, RD, RB, p) for p in concentric_disc_mm(u, 1.0)]
+    Q = np.array([p for p, _ in pts])
+    rho = np.array([r for _, r in pts])
+    ok2, f2 = passes(Q)
+    est = np.mean(ok2 * f2 * math.pi * rho ** 2)
+    assert est == pytest.approx(exact, rel=3e-3)
+
+
+def test_mask_transmission_per_pixel_matches_the_reference_trace(tmp_path):
+    lens0 = read_lens("dgauss.50mm")
+    fd = focus(lens0, 2000.0).exact_film_distance_mm
+    mask = np.clip(np.random.default_rng(2).random((16, 16)), 0, 1)
+    lens = shaped_lens(lens0, ApertureShape(mask=mask))
+    film = Film.from_diagonal(35.0, 24, 18)
+    zp = fd + 30.0
+    passed = np.ones((18, 24), bool)
+    x, y = np.arange(24) + 0.3, np.arange(18) + 0.6
+    t = field_transmission(lens, fd, film, zp, np.array([3.0, -2.0]), x, y, passed)
+    # the reference tracer's hit on the stop (sub-lens traced one ray at a time)
+    from povlens.pupil.field import image_to_film_mm
+    X, Y = np.meshgrid(x, y)
+    f = image_to_film_mm(film, X.ravel(), Y.ravel())
+    o = np.c_[f, np.zeros(len(f))]
+    d = np.c_[3.0 - f[:, 0], -2.0 - f[:, 1], np.full(len(f), zp)]
+    row = lens.aperture_shape_row
+    ref = reference_tracer.trace_rays_from_film(lens0.sub_lens(row), fd, o, d)
+    r = lens.aperture_radius_mm[row]
+    want = lens.aperture_shape.transmission(ref.origin_mm[:, 0], ref.origin_mm[:, 1], r)
+    assert np.allclose(t.ravel(), want, atol=1e-6)
+    assert 0.05 < t.mean() < 0.95
+
+
+def test_auto_renders_mesh_with_a_shape_and_focal_blur_says_it_is_round(tmp_path):
+    scene = tmp_path / "b.pov"
+    scene.write_text(BOKEH)
+    rc = main(["convert", str(scene), "--lens", "dgauss.50mm", "--focus", "4",
+               "--method", "focal-blur", "--width", "32", "--height", "24",
+               "--aperture-blades", "7", "-o", str(tmp_path / "fb")])
+    assert rc == 0
+    plan = read_plan(tmp_path / "fb" / "plan.json")
+    assert any("focal_blur renders a round aperture" in n for n in plan.notes)
+    # the decision: a blur the thin lens draws within the budget -> focal-blur, unless
+    # the stop is shaped
+    c = plan.thin_lens.centre_z_mm
+    kw = dict(near_z_mm=c + 3000.0, far_z_mm=c + 6000.0, model=plan.thin_lens,
+              model_error=plan.model_error, pixel_pitch_mm=plan.film.pixel_pitch_mm,
+              tolerance_px=0.2, vignetting=False)
+    free = decide(**kw)
+    assert free.method == "focal-blur", free.reasons
+    shaped = decide(aperture_shape=describe(ApertureShape(blades=7)), **kw)
+    assert shaped.method == "mesh"
+    assert "cannot draw the aperture shape (7 blades)" in shaped.reasons[-1]
+    # far out of focus everywhere below the budget: pinhole, shape or not
+    sharp = decide(aperture_shape="7 blades", **dict(kw, tolerance_px=50.0))
+    assert sharp.method == "pinhole"
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--aperture-blades", "2"], "--aperture-blades 2"),
+    (["--aperture-blades", "6", "--blade-curvature", "1.5"], "--blade-curvature 1.5"),
+    (["--blade-rotation", "15"], "--blade-rotation 15"),
+    (["--aperture-image", "missing.png"], "no such file"),
+    (["--aperture-image", "NOTPNG"], "not a readable image"),
+    (["--aperture-image", "BLACK"], "transmits no light")])
+def test_cli_errors_are_one_line(tmp_path, capsys, args, says):
+    scene = tmp_path / "b.pov"
+    scene.write_text(BOKEH)
+    if args[-1] == "NOTPNG":
+        (tmp_path / "x.png").write_text("not an image\n")
+        args = ["--aperture-image", str(tmp_path / "x.png")]
+    if args[-1] == "BLACK":
+        write_png_srgb(tmp_path / "k.png", np.zeros((8, 8, 3), np.float32))
+        args = ["--aperture-image", str(tmp_path / "k.png")]
+    rc = main(["convert", str(scene), "--lens", "dgauss.50mm", "--focus", "1",
+               "--method", "pinhole", "--width", "16", "--height", "16",
+               "-o", str(tmp_path / "o"), *args])
+    err = capsys.readouterr().err
+    assert rc == 2
+    first = err.strip().splitlines()[0]
+    assert first.startswith("povlens convert: error:") and says in first
+    assert "Traceback" not in err
