@@ -20,7 +20,7 @@ R_D is the largest gauge |P| / q of a passing point over film points at 9 radii 
 azimuths over one blade period (the lens is rotationally symmetric and the iris N-fold),
 found on a 64 x 64 grid over each film point's (conservative, round-stop) table region
 and refined by bisection outward along the rays through the outermost passing points,
-searched again on 7 x 7 film points about the film point of the largest gauge, then
+searched again on 5 x 5 film points about the film point of the largest gauge, then
 enlarged by :data:`DOMAIN_MARGIN`.  Tests check containment against dense random
 tracing at other film points.  Masks keep the disc (their open area need not be a
 star about the axis).
@@ -100,8 +100,8 @@ def iris_domain(lens, film_distance_mm: float, table, grid: int = 64, n_radii: i
     # a second, finer pass about the film point of the largest gauge
     g0, r0, phi0 = max(found)
     dr, dphi = r_max / max(n_radii - 1, 1), period / n_azimuths
-    finer = [(r, phi) for r in np.clip(r0 + dr * np.linspace(-1, 1, 7), 0.0, r_max)
-             for phi in phi0 + dphi * np.linspace(-1, 1, 7)]
+    finer = [(r, phi) for r in np.clip(r0 + dr * np.linspace(-1, 1, 5), 0.0, r_max)
+             for phi in phi0 + dphi * np.linspace(-1, 1, 5)]
     best = max([g0] + [_film_point_gauge(lens, film_distance_mm, table, shape, flip, r, phi,
                                          grid) for r, phi in finer])
     return best * (1.0 + DOMAIN_MARGIN), flip, {"film_points": len(film) + len(finer),

@@ -140,6 +140,14 @@ def test_iris_domain_contains_every_passing_ray_and_is_tight():
         gauge = np.hypot(P[ok, 0], P[ok, 1]) / iris_scale(shape, np.arctan2(P[ok, 1], P[ok, 0]),
                                                           flip)
         assert gauge.max() <= RD                       # conservative
+        if r == 21.0:
+            # the cat's eye still shows at the frame's edge: rims cut rays the iris passes
+            t = trace_from_film(lens, fd, o, np.c_[P - f, np.full(len(P), table.plane_z_mm)])
+            stop = lens.aperture_shape_row
+            inside = (np.hypot(P[:, 0], P[:, 1])
+                      < 0.9 * RD * iris_scale(shape, np.arctan2(P[:, 1], P[:, 0]), flip))
+            rims = inside & ~t.passed & (t.blocked_at != stop)
+            assert rims.sum() > 0.2 * inside.sum()
         if r == 0.0:
             Q = np.array([iris_point_mm(shape, flip, RD, RB, p)[0]
                           for p in concentric_disc_mm(rng.random((4000, 2)), 1.0)])

@@ -201,6 +201,13 @@ def test_dispersion_in_plan_and_notes(files):
     assert "only the mesh method renders colour fringes" in r.stderr
     plan = read_plan(files / "fb")
     assert plan.inputs.dispersion is None and plan.dispersion["rendered"] is False
+    # per-pixel meshes: rendered at the d line, with a note
+    r = povlens("convert", ROOT / "scenes" / "chart.pov", "--lens", "cooke.triplet.50mm",
+                "--dispersion", *SIZE, "--samples", "4", "--ray-mesh", "pixel",
+                "-o", files / "px")
+    assert r.returncode == 0, r.stderr
+    assert "--dispersion is rendered with field meshes only" in r.stderr
+    assert read_plan(files / "px").inputs.dispersion is None
 
 
 def test_composite_without_colour_science_exits_2(files, monkeypatch, capsys):
