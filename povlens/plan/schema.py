@@ -425,7 +425,9 @@ class Plan:
     printed once by the command line (empty: nothing, and not written);
     ``vignetting_map`` what the render of a pinhole or focal-blur view multiplied its
     image by for the lens's vignetting (:mod:`povlens.rendering.vignetting`; None:
-    nothing, and not written)."""
+    nothing, and not written); ``dispersion`` the lens's chromatic aberration with
+    ``--dispersion`` (:mod:`povlens.plan.dispersion_plan`; None: not asked or no Abbe
+    numbers, and not written)."""
 
     inputs: Inputs
     lens: LensSummary

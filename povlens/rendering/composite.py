@@ -16,7 +16,7 @@ import numpy as np
 from povlens.errors import PovlensError
 from povlens.util.images import read_image
 
-__all__ = ["composite", "accumulate_samples"]
+__all__ = ["composite", "accumulate_samples", "measurement_image"]
 
 
 def accumulate_samples(
@@ -99,6 +99,31 @@ def accumulate_samples(
     if weights is not None and next(weights, None) is not None:
         raise PovlensError(f"composite: {len(paths)} sample images but more weight arrays")
     return total, wsum
+
+
+def measurement_image(total: np.ndarray, wsum: np.ndarray, samples_per_row: np.ndarray,
+                      exposure: float | None) -> np.ndarray:
+    """(H, W, 3) float64 image of a mesh composite's sums (:func:`accumulate_samples`).
+
+    ``sum w I / sum w`` per pixel; with vignetting (``exposure`` not None) times the
+    measurement's ``exposure * sum w / N_p`` (``samples_per_row`` (H,) N_p).  With
+    channel weights (``wsum`` (H, W, 4), ``--dispersion``) each channel is the
+    colour-weighted mean ``sum f_c w I_c / sum f_c w`` and the measurement factor the
+    plain ``sum w``: a grey scene stays exactly grey at any sample count, the exposure
+    is the non-dispersive render's, and vignetting is taken achromatic.
+    """
+    image = np.zeros(total.shape[:2] + (3,))
+    if wsum.ndim == 3:
+        wc, w = wsum[..., :3], wsum[..., 3]
+        nz = wc > 0
+        image[nz] = total[..., :3][nz] / wc[nz]
+    else:
+        w = wsum
+        nz = w > 0
+        image[nz] = total[nz][:, :3] / w[nz][:, None]
+    if exposure is not None:
+        image *= (w * exposure / samples_per_row[:, None])[..., None]
+    return image
 
 
 def composite(

@@ -56,8 +56,8 @@ from povlens.plan.aperture import shape_of_inputs
 from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pupil.sampling import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
-from povlens.rendering.composite import accumulate_samples
-from povlens.rendering.spectral import plan_channel_factors, spectral_image
+from povlens.rendering.composite import accumulate_samples, measurement_image
+from povlens.rendering.spectral import plan_channel_factors
 from povlens.util.images import read_image, write_exr, write_png_srgb
 from povlens.pupil.rays import sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
@@ -499,14 +499,7 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
             paths, (sample_weight(outdir, k, plan, table) for k in rendered),
             drop_top_rows=drop, drop_right_columns=plan.povray.drop_right_columns,
             channel_weights=None if spectral is None else spectral[rendered])
-        if spectral is not None:
-            image = spectral_image(total, wsum, n_p, exposure if vignetting else None)
-        else:
-            image = np.zeros(total.shape[:2] + (3,))
-            nz = wsum > 0
-            image[nz] = total[nz][:, :3] / wsum[nz][:, None]
-            if vignetting:
-                image *= (wsum * exposure / n_p[:, None])[..., None]
+        image = measurement_image(total, wsum, n_p, exposure if vignetting else None)
     if write:
         _finish_image(outdir, image.astype(np.float32))
     return image

@@ -21,7 +21,8 @@ keep the first ones' wavelengths), rotated by the plan's seed, and
 lambda_k = P^-1(u_k).  Sample k's channel factors are f_kc = w_c(lambda_k) /
 p(lambda_k) divided by their mean over the plan's samples, so that a grey scene
 composites to exactly its grey and the exposure matches the render without
-dispersion (:func:`channel_factors`, :func:`spectral_image`).
+dispersion (:func:`channel_factors`,
+:func:`povlens.rendering.composite.measurement_image`).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from povlens.errors import PovlensError
 from povlens.lens.dispersion import BAND_NM
 
 __all__ = ["colour_weights", "sample_wavelength_nm", "channel_factors",
-           "plan_channel_factors", "spectral_image", "CMF_SOURCE"]
+           "plan_channel_factors", "CMF_SOURCE"]
 
 #: Share of every channel each sample keeps whatever its wavelength (channel_factors).
 FACTOR_FLOOR = 0.01
@@ -108,23 +109,3 @@ def plan_channel_factors(plan) -> np.ndarray | None:
         return None
     return channel_factors(int(plan.inputs.samples), plan.inputs.seed)
 
-
-def spectral_image(total: np.ndarray, wsum: np.ndarray, samples_per_row: np.ndarray,
-                   exposure: float | None) -> np.ndarray:
-    """(H, W, 3) composite of spectral sums (:func:`~povlens.rendering.composite.
-    accumulate_samples` with channel weights: ``wsum`` (H, W, 4)).
-
-    Each channel is the colour-weighted mean ``sum_k f_kc w_k I_kc / sum_k f_kc w_k``;
-    with vignetting (``exposure`` not None) times the plain measurement's
-    ``exposure * sum_k w_k / N_p`` (``samples_per_row`` (H,) N_p), as without
-    dispersion.  So a grey scene stays exactly grey at any sample count and the
-    exposure is the non-dispersive render's; the lens's vignetting is taken
-    achromatic (its change across the band is not rendered).
-    """
-    t, wc, w = total[..., :3], wsum[..., :3], wsum[..., 3]
-    image = np.zeros(t.shape)
-    nz = wc > 0
-    image[nz] = t[nz] / wc[nz]
-    if exposure is not None:
-        image *= (w * exposure / np.maximum(samples_per_row, 1)[:, None])[..., None]
-    return image

@@ -18,7 +18,7 @@ from povlens.lens.dispersion import BAND_NM, chief_landing_mm
 from povlens.lens.prescription import read_lens
 from povlens.plan.schema import read_plan
 from povlens.rendering import spectral
-from povlens.rendering.composite import accumulate_samples
+from povlens.rendering.composite import accumulate_samples, measurement_image
 from povlens.rendering.samples import lens_for
 from povlens.util.images import read_image, write_exr
 
@@ -100,7 +100,7 @@ def test_spectral_composite_keeps_grey_exactly_grey(tmp_path):
     f = spectral.channel_factors(8)
     total, wsum = accumulate_samples(paths, weights, channel_weights=f)
     assert wsum.shape == (6, 5, 4)
-    img = spectral.spectral_image(total, wsum, np.full(6, 8.0), 2.0)
+    img = measurement_image(total, wsum, np.full(6, 8.0), 2.0)
     plain_total, plain_w = accumulate_samples(paths, weights)
     expect = np.where(plain_w > 0, 0.25, 0.0) * plain_w * 2.0 / 8.0
     for c in range(3):
