@@ -1,3 +1,3 @@
-from povlens.cli import main
+from povlens.cli import run
 
-raise SystemExit(main())
+run()

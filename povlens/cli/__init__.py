@@ -114,6 +114,22 @@ def main(argv: list[str] | None = None) -> int:
         restore_warnings()
 
 
+def run() -> None:
+    """The ``povlens`` program: :func:`main`, then exit with its code.
+
+    After an interrupt (130, 143) the process ends with ``os._exit``: CPython kills
+    itself with SIGINT at exit, whatever the exit code, once a KeyboardInterrupt has
+    escaped any ``exec`` of a string (a dataclass being made, say) during the run (its
+    ``unhandled_keyboard_interrupt`` flag stays set), which would turn 130 and 143
+    into death by SIGINT.  The command's clean-up has run by then."""
+    code = main()
+    if code in (130, 143):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 def show_warnings_once(options: set[str]):
     """Print each distinct :class:`~povlens.errors.PovlensWarning` once, as one line
     ``povlens: warning: ...`` on stderr (parameters written as ``options``); other

@@ -51,12 +51,23 @@ class _AutoChoice:
 
 
 def _cancel_probe(probe_started: Callable) -> None:
-    """Stop a depth probe started in the background (nothing if its start failed)."""
-    try:
-        probe = probe_started()              # the probe, or its start's error
-    except BaseException:
-        return                               # never started: nothing to stop
-    probe.cancel()
+    """Stop a depth probe started in the background (nothing if its start failed).
+
+    A Ctrl-C or SIGTERM while waiting for the start is passed on once the probe is
+    stopped (swallowing it here let the render run on to the end)."""
+    interrupt, probe = None, None
+    while True:
+        try:
+            probe = probe_started()          # the probe, or its start's error
+            break
+        except KeyboardInterrupt as e:       # Terminated too: wait on, then pass it on
+            interrupt = e
+        except Exception:
+            break                            # never started: nothing to stop
+    if probe is not None:
+        probe.cancel()
+    if interrupt is not None:
+        raise interrupt
 
 
 def _settle_speculation(choice: _AutoChoice, guess: str) -> None:
