@@ -141,7 +141,7 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
            focus: float | None = None, method: str = "auto", samples: int | None = None,
            width: int | None = None, height: int | None = None, jobs: int | None = None,
            progress: bool = False, scheduler: str | None = None, shared_dir: bool = False,
-           **options) -> RenderResult:
+           group_size: int | None = None, **options) -> RenderResult:
     """Convert ``scene`` and render it through ``lens`` with POV-Ray.
 
     Parameters are those of :func:`convert`, plus:
@@ -161,6 +161,10 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
     shared_dir : bool
         With ``scheduler``: the workers see the scene, lens and ``outdir`` at the same
         paths, so nothing is sent to them.
+    group_size : int, optional
+        With ``scheduler``: lens samples per task, summed on the worker (default
+        :func:`povlens.rendering.groups.choose_group_size`; 1: the image is the local
+        one bit for bit).
 
     Returns
     -------
@@ -174,6 +178,10 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         from povlens.errors import ParameterError
         raise ParameterError("shared_dir", shared_dir, "shared_dir=True needs 'scheduler'",
                              "give the scheduler's address, or leave out 'shared_dir'")
+    if group_size is not None and scheduler is None:
+        from povlens.errors import ParameterError
+        raise ParameterError("group_size", group_size, "group_size=... needs 'scheduler'",
+                             "give the scheduler's address, or leave out 'group_size'")
     overrides = {"method": method, **options}
     if samples is not None:
         overrides.update(samples=int(samples), auto_samples=False)
@@ -185,7 +193,7 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
     if scheduler is not None:
         from povlens.cluster.render import convert_and_render_on_cluster
         plan, exr = convert_and_render_on_cluster(opts, scheduler, shared_dir=shared_dir,
-                                                  quiet=not progress)
+                                                  quiet=not progress, group_size=group_size)
     else:
         plan, exr = convert_and_render(opts, jobs=jobs, quiet=not progress)
     exr = Path(exr)
@@ -206,6 +214,7 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
                   outdir: str | os.PathLike, focus, frames: int | None = None,
                   method: str = "auto", samples: int | None = None, width: int | None = None,
                   height: int | None = None, jobs: int | None = None, progress: bool = False,
+                  scheduler=None, shared_dir: bool = False, group_size: int | None = None,
                   **options) -> FramesResult:
     """Render a focus pull: one frame per focus distance (:mod:`povlens.rendering.frames`).
 
@@ -216,6 +225,8 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
         (1/distance); a list: one frame per distance.  Scene units, positive, finite.
     frames : int, optional
         Frames of a pull (at least 2); with a list, its length if given.
+    scheduler, shared_dir, group_size : as :func:`render`: every frame's lens samples
+        on that Dask cluster, one client for all frames.
 
     Returns
     -------
@@ -244,8 +255,18 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
         overrides["width"] = int(width)
     if height is not None:
         overrides["height"] = int(height)
-    records = render_pull(_options(scene, lens, values[0], outdir, overrides), values,
-                          jobs=jobs, quiet=not progress)
+    opts = _options(scene, lens, values[0], outdir, overrides)
+    scheduler = scheduler or os.environ.get("POVLENS_SCHEDULER") or None
+    if scheduler is None and (shared_dir or group_size is not None):
+        name = "shared_dir" if shared_dir else "group_size"
+        raise ParameterError(name, shared_dir or group_size, f"{name}=... needs 'scheduler'",
+                             f"give the scheduler's address, or leave out '{name}'")
+    if scheduler is not None:
+        from povlens.cluster.render import render_frames_on_cluster
+        records = render_frames_on_cluster(opts, values, scheduler, shared_dir=shared_dir,
+                                           quiet=not progress, group_size=group_size)
+    else:
+        records = render_pull(opts, values, jobs=jobs, quiet=not progress)
     out = Path(outdir)
     return FramesResult(records, [out / r.image_exr for r in records],
                         [out / r.image_png for r in records])

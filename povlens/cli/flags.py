@@ -45,6 +45,7 @@ FLAG_OF = {
     "shift_mm": "--shift-mm",
     "scheduler": "--scheduler",
     "shared_dir": "--shared-dir",
+    "group_size": "--group-size",
     "aperture_blades": "--aperture-blades",
     "blade_curvature": "--blade-curvature",
     "blade_rotation_deg": "--blade-rotation",

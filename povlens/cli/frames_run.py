@@ -49,10 +49,18 @@ def run_convert_frames(args, opts: ConvertOptions, frames: list[float]) -> int:
     return 0
 
 
-def run_render_frames(args, opts: ConvertOptions, frames: list[float]) -> int:
-    from povlens.rendering.frames import render_frames
-    records = render_frames(opts, frames, jobs=args.jobs, quiet=args.quiet,
-                            on_plan=_printer(args.quiet))
+def run_render_frames(args, opts: ConvertOptions, frames: list[float],
+                      scheduler: str | None = None) -> int:
+    if scheduler is not None:        # every frame's lens samples on one Dask cluster
+        from povlens.cluster.render import render_frames_on_cluster
+        records = render_frames_on_cluster(opts, frames, scheduler, shared_dir=args.shared_dir,
+                                           quiet=args.quiet, on_plan=_printer(args.quiet),
+                                           connect_timeout_s=args.scheduler_timeout,
+                                           group_size=args.group_size)
+    else:
+        from povlens.rendering.frames import render_frames
+        records = render_frames(opts, frames, jobs=args.jobs, quiet=args.quiet,
+                                on_plan=_printer(args.quiet))
     if not args.quiet:
         print(_table(records, opts.units))
         print(f"wrote {args.outdir}/image.0001.exr ... image.{len(records):04d}.exr (and .png), "

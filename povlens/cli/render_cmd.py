@@ -15,7 +15,7 @@ import math
 import os
 import sys
 
-from povlens.cli.common import positive_float, print_json
+from povlens.cli.common import positive_float, positive_int, print_json
 from povlens.cli.flags import with_flags
 from povlens.errors import UsageError
 from povlens.lens.film import parse_film_size, parse_shift
@@ -109,6 +109,11 @@ def _add_cluster_arguments(p: argparse.ArgumentParser) -> None:
                         "the samples in place")
     g.add_argument("--scheduler-timeout", type=positive_float, default=10.0, metavar="S",
                    help="seconds to wait for the scheduler to answer (default 10)")
+    g.add_argument("--group-size", type=positive_int, metavar="N",
+                   help="with --scheduler: lens samples per task, summed on the worker "
+                        "(default: the larger of samples/(2 workers) and sqrt(samples/2), "
+                        "at most 16; 1: each sample comes back, the image bit for bit the "
+                        "local one)")
 
 
 def _scheduler_of(args) -> str | None:
@@ -116,6 +121,8 @@ def _scheduler_of(args) -> str | None:
     scheduler = args.scheduler or os.environ.get("POVLENS_SCHEDULER") or None
     if scheduler is None and args.shared_dir:
         raise UsageError("--shared-dir needs --scheduler (or POVLENS_SCHEDULER)")
+    if scheduler is None and getattr(args, "group_size", None) is not None:
+        raise UsageError("--group-size needs --scheduler (or POVLENS_SCHEDULER)")
     return scheduler
 
 
@@ -308,11 +315,8 @@ def run_convert(args) -> int:
 def run_render(args) -> int:
     frames = focus_frames(args)
     if frames is not None:                   # a focus pull: one folder per frame
-        if args.scheduler:
-            raise UsageError("--scheduler does not render focus pulls (--frames) yet",
-                             "render each frame with --scheduler, or leave it out")
         from povlens.cli.frames_run import run_render_frames
-        return run_render_frames(args, options_from_args(args), frames)
+        return run_render_frames(args, options_from_args(args), frames, _scheduler_of(args))
     from povlens.rendering.samples import convert_and_render
 
     def on_plan(plan: Plan) -> None:
@@ -324,7 +328,8 @@ def run_render(args) -> int:
         from povlens.cluster.render import convert_and_render_on_cluster
         _, out = convert_and_render_on_cluster(
             options_from_args(args), scheduler, shared_dir=args.shared_dir, quiet=args.quiet,
-            on_plan=None if args.quiet else on_plan, connect_timeout_s=args.scheduler_timeout)
+            on_plan=None if args.quiet else on_plan, connect_timeout_s=args.scheduler_timeout,
+            group_size=args.group_size)
     else:
         _, out = convert_and_render(options_from_args(args), jobs=args.jobs, quiet=args.quiet,
                                     on_plan=None if args.quiet else on_plan)

@@ -31,7 +31,7 @@ from pathlib import Path
 from povlens.errors import ParameterError, PovlensError
 from povlens.plan.schema import Plan
 
-__all__ = ["BUNDLE_LIMIT_BYTES", "make_bundle", "replica_root", "in_replica"]
+__all__ = ["BUNDLE_LIMIT_BYTES", "make_bundle", "replica_root", "in_replica", "remove_replica"]
 
 #: Largest bundle sent (bytes, before compression); past it the render asks for
 #: ``shared_dir`` or a scene folder of its own.
@@ -176,3 +176,14 @@ def replica_root(key: str, data: bytes, outdir: str) -> Path:
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     return root
+
+
+def remove_replica(key: str) -> bool:
+    """Delete this machine's replica of bundle ``key`` (the client's render ended);
+    returns whether there was one.  A later task of the same bundle unpacks it again."""
+    root = Path(tempfile.gettempdir()) / "povlens-cluster" / key
+    with _lock:
+        if not root.is_dir():
+            return False
+        shutil.rmtree(root, ignore_errors=True)
+    return True

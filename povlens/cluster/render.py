@@ -1,15 +1,20 @@
 """The client of a distributed render: lens samples on a Dask cluster, composited here.
 
 ``povlens render --scheduler ADDRESS`` converts as usual, then
-:func:`render_outdir_on_cluster` sends every lens sample not yet rendered to the
-scheduler as one task (:func:`povlens.cluster.worker.render_sample`), the render
-folder's bundle (:mod:`povlens.cluster.bundle`) scattered to every worker once.  Each
-sample's files are written into ``OUTDIR/samples/`` (atomically) as it comes back
-and added to the composite's sums, in sample order (:func:`povlens.rendering.samples.sample_sums`,
-then :func:`~povlens.rendering.samples.composite_outdir`), so the image is bit for bit
-the one a local render makes.  A worker that dies
-loses its samples in flight; the scheduler runs them again on another worker.  An
-interrupted render resumes from the samples on disk, locally or on a cluster.
+:func:`render_outdir_on_cluster` cuts the lens samples not yet rendered into groups of
+consecutive samples, one task each (:func:`povlens.cluster.worker.render_group`: the
+worker renders them with several POV-Ray processes in flight and adds them into a
+partial sum), the render folder's bundle (:mod:`povlens.cluster.bundle`) scattered to
+every worker once.  Each group's partial sums are written into
+``OUTDIR/samples/group_K0_K1.npz`` (atomically) as they come back and added to the
+composite's sums in group order (:mod:`povlens.rendering.groups`), so the image is
+the local one within the float32 rounding of the partials, whatever the number of
+workers or the order groups finish in.  With group size 1 a task is one sample
+(:func:`~povlens.cluster.worker.render_sample`), its files come back, and the image is
+the local one bit for bit.  A worker that dies loses its groups in flight; the
+scheduler runs them again on another worker.  An interrupted render resumes from the
+groups and samples on disk, locally or on a cluster.  When the render ends, the
+workers delete their copies of the bundle.
 """
 
 from __future__ import annotations
@@ -22,17 +27,20 @@ import uuid
 from pathlib import Path
 
 from povlens.cluster.bundle import make_bundle
-from povlens.cluster.worker import render_sample
+from povlens.cluster.worker import forget_render, render_group, render_sample
 from povlens.errors import ParameterError, PovlensError, PovrayError
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import read_plan
+from povlens.rendering.groups import (UnitSums, choose_group_size, chunk_groups, render_units,
+                                      unit_terms, write_group)
 from povlens.rendering.samples import (composite_outdir, exposure_for, lens_for,
                                        mark_batches_done, pupil_table_for, render_outdir,
                                        sample_done, sample_sums)
 from povlens.util.files import write_bytes, write_text
 
 __all__ = ["ENV_VAR", "CONNECT_TIMEOUT_S", "WORKER_WAIT_S", "scheduler_address", "connect",
-           "render_outdir_on_cluster", "convert_and_render_on_cluster"]
+           "render_outdir_on_cluster", "convert_and_render_on_cluster",
+           "render_frames_on_cluster", "task_samples"]
 
 #: Environment variable naming the scheduler when ``--scheduler`` is not given.
 ENV_VAR = "POVLENS_SCHEDULER"
@@ -94,7 +102,7 @@ def _raise_task_error(err: dict, k: int, host: str) -> None:
     raise cls(f"lens sample {k} on worker {host}: {err['message']}", err["hint"])
 
 
-def _submit(client, job: dict, todo: list[int], worker_wait_s: float) -> list:
+def _wait_for_workers(client, worker_wait_s: float) -> None:
     try:
         client.wait_for_workers(1, timeout=worker_wait_s)
     except TimeoutError:
@@ -102,81 +110,87 @@ def _submit(client, job: dict, todo: list[int], worker_wait_s: float) -> list:
                            f"within {worker_wait_s:g} s",
                            "start workers ('dask worker ADDRESS') with POV-Ray and povlens "
                            "installed") from None
+
+
+def _submit(client, job: dict, groups: list[list[int]], group_size: int) -> list:
+    """One task per group (:func:`~povlens.cluster.worker.render_group`; with group
+    size 1, one per sample: :func:`~povlens.cluster.worker.render_sample`)."""
     # every worker gets the bundle once (not with each task); a worker that joins
     # later fetches it from another
     [job_future] = client.scatter([job], broadcast=True, hash=False)
     token = uuid.uuid4().hex[:8]
-    return [client.submit(render_sample, job_future, k, key=f"povlens-sample-{k:04d}-{token}",
-                          retries=RETRIES, pure=False) for k in todo]
+    if group_size == 1:
+        return [client.submit(render_sample, job_future, ks[0],
+                              key=f"povlens-sample-{ks[0]:04d}-{token}", retries=RETRIES,
+                              pure=False) for ks in groups]
+    return [client.submit(render_group, job_future, ks,
+                          key=f"povlens-group-{ks[0]:04d}-{ks[-1] + 1:04d}-{token}",
+                          retries=RETRIES, pure=False) for ks in groups]
 
 
-class _Sums:
-    """The composite's sums, added in sample order as the samples arrive (one that
-    comes early waits on disk for those before it), so the composite is the one of a
-    local render bit for bit and its cost overlaps the cluster's rendering."""
+def task_samples(key: str) -> list[int]:
+    """The lens samples of a task of :func:`_submit`, from its key."""
+    parts = key.split("-")
+    k0 = int(parts[2])
+    return list(range(k0, int(parts[3]))) if parts[1] == "group" else [k0]
 
-    def __init__(self, outdir: Path, plan, table):
-        self.outdir, self.plan, self.table = outdir, plan, table
-        self.next_k, self.ready = 0, set()
-        self.total = self.wsum = None
-        self.seconds = 0.0
 
-    def add(self, k: int) -> None:
-        t0 = time.perf_counter()
-        self.ready.add(k)
-        while self.next_k in self.ready:
-            terms = sample_sums(self.outdir, self.next_k, self.plan, self.table)
-            if terms is not None and self.total is None:
-                self.total, self.wsum = terms
-            elif terms is not None:
-                self.total += terms[0]
-                self.wsum += terms[1]
-            self.ready.discard(self.next_k)
-            self.next_k += 1
-        self.seconds += time.perf_counter() - t0
-
-    def result(self):
-        if self.next_k != self.plan.inputs.samples:
-            raise PovlensError(f"{self.outdir}: sample {self.next_k} never came back")
-        return None if self.total is None else (self.total, self.wsum)
+def _write_result(outdir: Path, res: dict, shared: bool) -> None:
+    """Write a task's files into ``OUTDIR/samples`` (atomically; a sample's image last:
+    then it is done) and check they are there."""
+    samples = outdir / "samples"
+    ks = res["ks"]
+    if "group" in res["files"]:
+        write_group(outdir, ks, res["files"]["group"])
+        return
+    for name, data in sorted(res["files"].items(), key=lambda f: f[0].endswith(".exr")):
+        write_bytes(samples / name, data)
+    if not all(sample_done(outdir, k) for k in ks):
+        raise PovlensError(f"lens sample {ks[0]}: worker {res['host']} rendered it, but "
+                           f"{samples} has no result" + (
+                               ": do the workers see this folder at the same path?"
+                               if shared else ""),
+                           "leave out 'shared_dir'" if shared else None)
 
 
 def _collect(client, futures, outdir: Path, shared: bool, on_sample, bar,
-             sums: _Sums) -> list[dict]:
-    """Write each sample's files as it comes back and add it to ``sums``; returns the
-    results' timings."""
+             sums: UnitSums) -> list[dict]:
+    """Write each task's files as it comes back and add them to ``sums``; returns the
+    results' timings (one record per task)."""
     from distributed import as_completed
-    samples = outdir / "samples"
     tasks = []
     t0 = time.perf_counter()
     for fut in as_completed(futures, loop=client.loop):
-        k = int(fut.key.split("-")[2])
+        ks = task_samples(fut.key)
         try:
             res = fut.result()
         except Exception as e:     # retries exhausted, or a sample that killed its workers
-            raise PovlensError(f"lens sample {k} failed on the cluster: "
+            raise PovlensError(f"lens samples {ks[0]}..{ks[-1]} failed on the cluster: "
                                f"{type(e).__name__}: {e}",
                                "see the workers' logs; the samples already rendered are "
                                "kept, so running again resumes") from None
         if "error" in res:
-            _raise_task_error(res["error"], k, res["host"])
-        for name, data in sorted(res["files"].items(), key=lambda f: f[0].endswith(".exr")):
-            write_bytes(samples / name, data)     # the image last: then the sample is done
-        if not sample_done(outdir, k):
-            raise PovlensError(f"lens sample {k}: worker {res['host']} rendered it, but "
-                               f"{samples} has no result" + (
-                                   ": do the workers see this folder at the same path?"
-                                   if shared else ""),
-                               "leave out 'shared_dir'" if shared else None)
-        sums.add(k)
-        tasks.append({"k": k, "host": res["host"], "pid": res["pid"],
-                      "arrived_s": time.perf_counter() - t0,
+            _raise_task_error(res["error"], ks[0], res["host"])
+        t1 = time.perf_counter()
+        _write_result(outdir, res, shared)
+        sums.add(ks[0], ks[-1] + 1)
+        tasks.append({"k": ks[0], "ks": ks, "host": res["host"], "pid": res["pid"],
+                      "arrived_s": t1 - t0, "client_s": time.perf_counter() - t1,
                       "result_bytes": sum(len(d) for d in res["files"].values()),
                       **res["timing"]})
-        bar.update(1)
+        bar.update(len(ks))
         if on_sample is not None:
             on_sample(tasks[-1])
     return tasks
+
+
+def _forget(client, key: str) -> None:
+    """Delete the workers' replicas of bundle ``key`` (the render is over: no task of
+    it runs again).  A worker that does not answer keeps its copy (in its $TMPDIR)."""
+    try:
+        client.run(forget_render, key, on_error="ignore")
+    except Exception:           # a worker gone, a client closing: nothing to clean
+        pass
 
 
 def _client_of(scheduler, timeout_s: float):
@@ -196,11 +210,22 @@ def _client_of(scheduler, timeout_s: float):
                          "give the scheduler's address, tcp://HOST:8786")
 
 
+def _group_size(group_size: int | None, client, samples: int) -> int:
+    if group_size is None:
+        return choose_group_size(samples, len(client.nthreads()))
+    if isinstance(group_size, bool) or not isinstance(group_size, int) or group_size < 1:
+        raise ParameterError("group_size", group_size,
+                             f"group_size={group_size!r}: not a whole number >= 1",
+                             "give the lens samples per task (1: one task per sample, the "
+                             "image bit for bit the local one), or leave it out")
+    return group_size
+
+
 def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
                              shared_dir: bool = False, quiet: bool = False,
                              connect_timeout_s: float = CONNECT_TIMEOUT_S,
                              worker_wait_s: float = WORKER_WAIT_S,
-                             on_sample=None) -> tuple[Path, dict]:
+                             on_sample=None, group_size: int | None = None) -> tuple[Path, dict]:
     """Render a converted folder's lens samples on a Dask cluster and composite.
 
     Parameters
@@ -214,17 +239,23 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
     quiet : no progress bar.
     connect_timeout_s, worker_wait_s : how long to wait for the scheduler to answer
         and for a first worker.
-    on_sample : called as each sample is written, with its record (``k``, ``host``,
-        ``pid`` of the worker, timings: as in ``stats["tasks"]``).
+    on_sample : called as each task's result is written, with its record (``k``,
+        ``ks``, ``host``, ``pid`` of the worker, timings: as in ``stats["tasks"]``).
+    group_size : lens samples per task (consecutive), summed on the worker with
+        several POV-Ray processes in flight (:mod:`povlens.rendering.groups`); 1: one
+        task per sample, whose files come back, and the image is the local one bit for
+        bit.  Default :func:`~povlens.rendering.groups.choose_group_size`.
 
     Returns
     -------
     image : Path of ``image.exr``.
     stats : dict
-        ``samples``, ``wall_s``, ``connect_s``, ``scatter_s`` (bundle to the workers),
-        ``bundle_bytes``, ``workers``, and per sample (``tasks``): host, arrival time,
-        result bytes and the worker's timing (:func:`povlens.cluster.worker.render_sample`).
-        Also written to ``samples/cluster.timing.json``.
+        ``samples``, ``group_size``, ``wall_s``, ``connect_s``, ``scatter_s`` (bundle
+        to the workers), ``bundle_bytes``, ``workers``, ``threads``, and per task
+        (``tasks``): samples, host, arrival time, the client's time on it (write and
+        add), result bytes and the worker's timing
+        (:func:`povlens.cluster.worker.render_sample`).  Also written to
+        ``samples/cluster.timing.json``.
     """
     from tqdm import tqdm
     t0 = time.perf_counter()
@@ -232,42 +263,49 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
     plan = read_plan(outdir)
     if plan.inputs.method != "mesh":
         return render_outdir(outdir, quiet=quiet), {"samples": 0}
-    todo = [k for k in range(plan.inputs.samples) if not sample_done(outdir, k)]
+    done, todo = render_units(outdir, plan, sample_done)   # groups and samples on disk
     stats = {"samples": len(todo), "tasks": []}
+    sums = None
     if todo:
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)       # built here once, sent with the job
         client, owned = _client_of(scheduler, connect_timeout_s)
         stats["connect_s"] = time.perf_counter() - t0
-        futures = []
+        futures, job = [], None
         try:
+            _wait_for_workers(client, worker_wait_s)
+            size = _group_size(group_size, client, len(todo))
+            groups = chunk_groups(todo, size)
             if shared_dir:
                 job = {"outdir": str(outdir), "key": f"shared-{uuid.uuid4().hex}",
                        "bundle": None, "shared": True}
             else:
                 key, data = make_bundle(outdir, plan)
                 job = {"outdir": str(outdir), "key": key, "bundle": data, "shared": False}
-            stats["bundle_bytes"] = len(job["bundle"] or b"")
-            futures = _submit(client, job, todo, worker_wait_s)
+            stats.update(bundle_bytes=len(job["bundle"] or b""), group_size=size,
+                         groups=len(groups))
+            futures = _submit(client, job, groups, size)
             stats["scatter_s"] = time.perf_counter() - t0 - stats["connect_s"]
             stats["workers"] = len(client.nthreads())
+            stats["threads"] = sum(client.nthreads().values())
             exposure_for(outdir, plan, lens, table)      # while the workers render
-            sums = _Sums(outdir, plan, table)
-            for k in sorted(set(range(plan.inputs.samples)) - set(todo)):
-                sums.add(k)                              # rendered before: resumed
+            sums = UnitSums(plan.inputs.samples, unit_terms(outdir, plan, table, sample_sums))
+            for k0, k1 in done:
+                sums.add(k0, k1)                         # rendered before: resumed
             with tqdm(total=len(todo), desc="lens samples", unit="sample", file=sys.stderr,
                       disable=quiet or not sys.stderr.isatty()) as bar:
                 stats["tasks"] = _collect(client, futures, outdir, shared_dir, on_sample,
                                           bar, sums)
-            stats["composite_during_s"] = sums.seconds
         finally:
             if futures:
                 client.cancel(futures)
+            if job is not None:         # the workers' replica and loaded plan
+                _forget(client, job["key"])
             if owned:
                 client.close()
     mark_batches_done(outdir, plan)
     t1 = time.perf_counter()
-    composite_outdir(outdir, sums=sums.result() if todo else None)
+    composite_outdir(outdir, sums=sums.result(str(outdir)) if sums is not None else None)
     stats["composite_after_s"] = time.perf_counter() - t1
     stats["wall_s"] = time.perf_counter() - t0
     if todo:
@@ -275,21 +313,48 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
     return outdir / "image.exr", stats
 
 
-def convert_and_render_on_cluster(opts: ConvertOptions, scheduler: str, shared_dir: bool = False,
+def convert_and_render_on_cluster(opts: ConvertOptions, scheduler, shared_dir: bool = False,
                                   quiet: bool = False, on_plan=None,
-                                  connect_timeout_s: float = CONNECT_TIMEOUT_S):
+                                  connect_timeout_s: float = CONNECT_TIMEOUT_S,
+                                  group_size: int | None = None, depth_probe=None):
     """``povlens render --scheduler``: convert ``opts`` here (the depth probe of
-    ``--method auto`` too), then :func:`render_outdir_on_cluster`.  Returns (plan,
-    path of image.exr).  The scheduler is asked first, so one that does not answer
-    fails before the conversion's work."""
+    ``--method auto`` too; ``depth_probe`` as :func:`~povlens.plan.convert.convert`
+    takes it), then :func:`render_outdir_on_cluster`.  Returns (plan, path of
+    image.exr).  The scheduler is asked first, so one that does not answer fails
+    before the conversion's work."""
     client, owned = _client_of(scheduler, connect_timeout_s)
     try:
-        plan = convert(opts)
+        if group_size is not None:
+            _group_size(group_size, client, 1)          # checked before converting
+        plan = convert(opts, depth_probe=depth_probe)
         if on_plan is not None:
             on_plan(plan)
         exr, _ = render_outdir_on_cluster(opts.outdir, client, shared_dir=shared_dir,
-                                          quiet=quiet)
+                                          quiet=quiet, group_size=group_size)
     finally:
         if owned:
             client.close()
     return plan, exr
+
+
+def render_frames_on_cluster(opts: ConvertOptions, focus_values: list[float], scheduler,
+                             shared_dir: bool = False, quiet: bool = False, on_plan=None,
+                             connect_timeout_s: float = CONNECT_TIMEOUT_S,
+                             group_size: int | None = None):
+    """A focus pull (``povlens render --frames N --scheduler``): every frame converted
+    here and its lens samples rendered on the cluster, one client for all frames
+    (:func:`povlens.rendering.frames.render_frames` with this frame renderer).
+    Returns the frames' records."""
+    from povlens.rendering.frames import render_frames
+    client, owned = _client_of(scheduler, connect_timeout_s)
+    try:
+        def render_frame(frame_opts, on_plan=None, depth_probe=None, **_):
+            return convert_and_render_on_cluster(frame_opts, client, shared_dir=shared_dir,
+                                                 quiet=quiet, on_plan=on_plan,
+                                                 group_size=group_size,
+                                                 depth_probe=depth_probe)
+        return render_frames(opts, focus_values, quiet=quiet, on_plan=on_plan,
+                             render_frame=render_frame)
+    finally:
+        if owned:
+            client.close()

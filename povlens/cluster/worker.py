@@ -1,13 +1,16 @@
-"""The task a Dask worker runs: one lens sample, rendered by the local code.
+"""The tasks a Dask worker runs: lens samples, rendered by the local code.
 
-:func:`render_sample` traces sample k and runs POV-Ray for it with
+:func:`render_group` renders a group of consecutive samples with several POV-Ray
+processes in flight and returns their partial sums (:mod:`povlens.rendering.groups`);
+:func:`render_sample` (group size 1) traces sample k and runs POV-Ray for it with
 :func:`povlens.rendering.samples.render_samples`, exactly as ``povlens render`` does on
 one machine, in the worker's replica of the render folder
 (:func:`povlens.cluster.bundle.replica_root`), then returns the sample's files (image,
 pass mask or weights, blocked marker) as bytes.  A sample is fixed by the plan (seed,
 sample number), so where and in which order samples render does not change them.
 
-No Dask import here: the worker imports this module by name when it unpickles the task.
+Dask is imported only to ask the worker its thread count: the worker imports this module
+by name when it unpickles the task.
 """
 
 from __future__ import annotations
@@ -18,12 +21,14 @@ import threading
 import time
 from pathlib import Path
 
-from povlens.cluster.bundle import in_replica, replica_root
+from povlens.cluster.bundle import in_replica, remove_replica, replica_root
 from povlens.errors import PovlensError
 from povlens.plan.schema import read_plan
-from povlens.rendering.samples import lens_for, pupil_table_for, render_samples
+from povlens.rendering.groups import GroupSums, pack_group
+from povlens.rendering.samples import (POVRAY_IN_FLIGHT, lens_for, pupil_table_for,
+                                       render_samples, sample_done, sample_sums)
 
-__all__ = ["render_sample", "sample_files"]
+__all__ = ["render_sample", "render_group", "forget_render", "sample_files"]
 
 #: Render folder key -> (plan, lens, pupil table): read once per worker process.
 _loaded: dict[str, tuple] = {}
@@ -47,28 +52,23 @@ def _load(key: str, outdir: Path):
         return _loaded[key]
 
 
-def render_sample(job: dict, k: int) -> dict:
-    """Render lens sample ``k`` of the render folder ``job`` describes.
+def _in_flight() -> int:
+    """POV-Ray processes a task keeps in flight: the local pipeline's
+    :data:`~povlens.rendering.samples.POVRAY_IN_FLIGHT` per core, shared among the
+    worker's threads (each runs a task)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:                      # not Linux
+        cores = os.cpu_count() or 1
+    try:
+        from distributed import get_worker
+        threads = get_worker().state.nthreads
+    except Exception:                           # not in a worker (a test calls it)
+        threads = 1
+    return max(1, round(POVRAY_IN_FLIGHT * cores / max(1, threads)))
 
-    Parameters
-    ----------
-    job : dict
-        ``outdir`` (the client's render folder, absolute), ``key`` and ``bundle``
-        (:func:`povlens.cluster.bundle.make_bundle`; ``bundle`` None with
-        ``shared``: the worker sees ``outdir`` itself and writes the sample there).
-    k : int
-        The sample number.
 
-    Returns
-    -------
-    dict
-        ``k``; ``files``: {file name: bytes} of the sample's outputs (empty when
-        shared); ``timing``: seconds of unpacking (``unpack_s``), tracing
-        (``rays_and_meshes_s``), POV-Ray (``povray_s``) and the whole task
-        (``task_s``); ``host``.  A :class:`~povlens.errors.PovlensError` (the scene
-        fails in POV-Ray, say) is returned as ``error`` = {type, message, hint}, not
-        raised, so Dask does not retry what would fail again.
-    """
+def _run(job: dict, ks: list[int], group: bool) -> dict:
     t0 = time.perf_counter()
     host = socket.gethostname()
     try:
@@ -81,17 +81,91 @@ def render_sample(job: dict, k: int) -> dict:
         plan, lens, table = _load(job["key"] + ("-shared" if job["shared"] else ""), outdir)
         samples = outdir / "samples"
         if not job["shared"]:
-            for p in sample_files(samples, k):  # an earlier attempt's, on this machine
-                p.unlink(missing_ok=True)
-        timing = render_samples(plan, lens, table, outdir, 0, [k], in_flight=1)
+            for k in ks:         # an earlier attempt's, on this machine
+                for p in sample_files(samples, k):
+                    p.unlink(missing_ok=True)
+        in_flight = job.get("in_flight") or _in_flight()
+        # the group's partial sums, each sample added here in sample order as soon as
+        # it is rendered, while the group's other POV-Ray processes run
+        sums = GroupSums(ks, lambda k: sample_sums(outdir, k, plan, table))
+        t_sums = 0.0
+
+        def add_ready():
+            nonlocal t_sums
+            t = time.perf_counter()
+            sums.ready(lambda k: sample_done(outdir, k))
+            t_sums += time.perf_counter() - t
+
+        timing = render_samples(plan, lens, table, outdir, 0, ks,
+                                in_flight=in_flight if group else 1,
+                                on_done=add_ready if group else None)
         files = {}
+        if group:
+            add_ready()
+            files["group"] = pack_group(ks, *sums.result())
         if not job["shared"]:
-            for p in sample_files(samples, k):
-                files[p.name] = p.read_bytes()
-                p.unlink(missing_ok=True)
+            for k in ks:
+                for p in sample_files(samples, k):
+                    if not group:
+                        files[p.name] = p.read_bytes()
+                    p.unlink(missing_ok=True)
     except PovlensError as e:
-        return {"k": k, "host": host, "error": {"type": type(e).__name__,
-                                                "message": e.message, "hint": e.hint}}
-    return {"k": k, "host": host, "pid": os.getpid(), "files": files,
+        return {"k": ks[0], "ks": ks, "host": host,
+                "error": {"type": type(e).__name__, "message": e.message, "hint": e.hint}}
+    return {"k": ks[0], "ks": ks, "host": host, "pid": os.getpid(), "files": files,
             "timing": {"unpack_s": t_unpack, "rays_and_meshes_s": timing["rays_and_meshes_s"],
-                       "povray_s": timing["povray_s"], "task_s": time.perf_counter() - t0}}
+                       "povray_s": timing["povray_s"], "sums_s": t_sums,
+                       "in_flight": in_flight if group else 1,
+                       "task_s": time.perf_counter() - t0}}
+
+
+def render_sample(job: dict, k: int) -> dict:
+    """Render lens sample ``k`` of the render folder ``job`` describes (group size 1).
+
+    Parameters
+    ----------
+    job : dict
+        ``outdir`` (the client's render folder, absolute), ``key`` and ``bundle``
+        (:func:`povlens.cluster.bundle.make_bundle`; ``bundle`` None with
+        ``shared``: the worker sees ``outdir`` itself and writes the sample there);
+        optional ``in_flight`` (POV-Ray processes of a group task).
+    k : int
+        The sample number.
+
+    Returns
+    -------
+    dict
+        ``k``, ``ks`` = [k]; ``files``: {file name: bytes} of the sample's outputs
+        (empty when shared); ``timing``: seconds of unpacking (``unpack_s``), tracing
+        (``rays_and_meshes_s``), POV-Ray (``povray_s``, summed over processes),
+        partial sums (``sums_s``) and the whole task (``task_s``); ``host``, ``pid``.
+        A :class:`~povlens.errors.PovlensError` (the scene fails in POV-Ray, say) is
+        returned as ``error`` = {type, message, hint}, not raised, so Dask does not
+        retry what would fail again.
+    """
+    return _run(job, [int(k)], group=False)
+
+
+def render_group(job: dict, ks: list[int]) -> dict:
+    """Render the lens samples ``ks`` (consecutive, ascending) with several POV-Ray
+    processes in flight (:func:`_in_flight`) and return their partial sums.
+
+    Returns
+    -------
+    dict
+        As :func:`render_sample`, but ``files`` = {"group": bytes of the group file}
+        (:func:`povlens.rendering.groups.pack_group`: float32 ``sum w I`` (H, W, 3) and
+        ``sum w``, added in sample order); the samples' own files are deleted (kept
+        in place when shared).
+    """
+    return _run(job, [int(k) for k in ks], group=True)
+
+
+def forget_render(key: str) -> bool:
+    """Delete this machine's replica of bundle ``key`` and this process's loaded plan
+    (run on every worker when the client's render ends).  Returns whether a replica
+    was deleted."""
+    with _loaded_lock:
+        _loaded.pop(key, None)
+        _loaded.pop(key + "-shared", None)
+    return remove_replica(key)

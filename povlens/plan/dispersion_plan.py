@@ -63,7 +63,7 @@ def apply_dispersion(opts, plan, lens, table) -> None:
         return
     film, focus = plan.film, plan.focus
     info = chromatic_aberration(lens, focus.film_distance_mm,
-                                focus.object_distance_from_film_mm, film.half_diagonal_mm,
+                                focus.object_distance_from_film_mm, film.max_field_radius_mm,
                                 film.pixel_pitch_mm)
     info.update(rendered=False, band_nm=list(BAND_NM), model=COLOUR_MODEL)
     plan.dispersion = info
@@ -78,7 +78,7 @@ def apply_dispersion(opts, plan, lens, table) -> None:
                       f"meshes render the d line ({colour})")
         return
     fm = plan.field_mesh
-    field_radius = max(film.half_diagonal_mm, float(table.max_film_radius_mm))
+    field_radius = max(film.max_field_radius_mm, float(table.max_film_radius_mm))
     radius = disc_radius_mm(lens, focus.film_distance_mm, field_radius, table.plane_z_mm,
                             fm.pupil_disc_radius_mm)
     info.update(rendered=True, pupil_disc_radius_d_line_mm=fm.pupil_disc_radius_mm)
@@ -106,7 +106,7 @@ def colour_decision(opts, lens, plan, decision):
         return decision
     film, focus = plan.film, plan.focus
     ca = chromatic_aberration(lens, focus.film_distance_mm, focus.object_distance_from_film_mm,
-                              film.half_diagonal_mm, film.pixel_pitch_mm)
+                              film.max_field_radius_mm, film.pixel_pitch_mm)
     colour_px = max(ca["max_lateral_colour_px"], ca["longitudinal_blur_px"] or 0.0)
     if colour_px < opts.tolerance_px:
         decision.add_remark(f"--dispersion: the lens's colour ({colour_px:.2g} px) is within "

@@ -197,7 +197,7 @@ def _copy_images(outdir: Path, r: FrameRecord) -> None:
 
 
 def render_frames(opts: ConvertOptions, focus_values: list[float], jobs: int | None = None,
-                  quiet: bool = False, on_plan=None) -> list[FrameRecord]:
+                  quiet: bool = False, on_plan=None, render_frame=None) -> list[FrameRecord]:
     """Convert and render every frame of a focus pull (``povlens render --frames``).
 
     Parameters
@@ -209,6 +209,9 @@ def render_frames(opts: ConvertOptions, focus_values: list[float], jobs: int | N
     jobs : POV-Ray cores (as :func:`~povlens.rendering.samples.convert_and_render`).
     quiet : no progress (frame lines and bars) on stderr.
     on_plan : called with each frame's plan between its conversion and its render.
+    render_frame : converts and renders one frame, called as
+        :func:`~povlens.rendering.samples.convert_and_render` (the default) is;
+        :mod:`povlens.cluster` passes one rendering on its cluster.
 
     Returns
     -------
@@ -218,6 +221,7 @@ def render_frames(opts: ConvertOptions, focus_values: list[float], jobs: int | N
         resumes: finished frames are skipped, the interrupted one resumes.
     """
     from povlens.rendering.samples import convert_and_render
+    render_frame = render_frame or convert_and_render
     outdir = Path(opts.outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     records = _records(outdir, opts, focus_values)
@@ -231,8 +235,8 @@ def render_frames(opts: ConvertOptions, focus_values: list[float], jobs: int | N
             continue
         _say(quiet, f"frame {r.frame}/{n}: focus {r.focus:.6g} {opts.units}")
         t0 = time.perf_counter()
-        plan, _ = convert_and_render(_frame_options(opts, outdir, r), jobs=jobs, quiet=quiet,
-                                     on_plan=on_plan, depth_probe=probe)
+        plan, _ = render_frame(_frame_options(opts, outdir, r), jobs=jobs, quiet=quiet,
+                               on_plan=on_plan, depth_probe=probe)
         _copy_images(outdir, r)
         _fill(r, plan)
         r.seconds = round(time.perf_counter() - t0, 3)

@@ -63,6 +63,7 @@ from povlens.pupil.rays import sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
 from povlens.rendering.field_samples import (field_sample_weight, mask_path, placement_of,
                                              write_field_sample)
+from povlens.rendering.groups import group_sums, grouped
 from povlens.util.files import write_text
 from povlens.lens.aperture_shape import shaped_lens
 from povlens.lens.paraxial import stopped_down
@@ -127,8 +128,8 @@ def _sample_done(outdir: Path, k: int) -> bool:
     marker that it has none (all its rays blocked: it is black with weight 0, never
     rendered)."""
     exr, weight, _ = _sample_paths(outdir, k)
-    return ((weight.exists() or mask_path(outdir, k).exists())
-            and (exr.exists() or _blocked_path(outdir, k).exists()))
+    return ((weight.exists() or mask_path(outdir, k).exists())  # or a group's (groups.py)
+            and (exr.exists() or _blocked_path(outdir, k).exists())) or grouped(outdir, k)
 
 
 def sample_weight(outdir: str | os.PathLike, k: int, plan: Plan | None = None,
@@ -482,6 +483,7 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
     lens = lens_for(plan)
     table = pupil_table_for(outdir, plan, lens)
     exposure = exposure_for(outdir, plan, lens, table)
+    sums = sums if sums is not None else group_sums(outdir, plan, table, sample_sums)  # groups
     # Blocked samples (all rays blocked) are black with weight 0: they add nothing to
     # the sums but count in N_p.  Adaptive plans: sample k covers only its rows
     # (weight 0 elsewhere) and pixel p's N_p counts the samples covering its row.
@@ -524,20 +526,14 @@ def sample_sums(outdir: str | os.PathLike, k: int, plan: Plan, table):
         channel_weights=None if spectral is None else spectral[[k]])
 
 
-def sample_done(outdir: str | os.PathLike, k: int) -> bool:
-    """Whether lens sample k of a mesh folder is rendered (a resumed render skips it)."""
-    return _sample_done(Path(outdir), k)
-
-
-def mark_batches_done(outdir: str | os.PathLike, plan: Plan) -> None:
-    _mark_batches_done(Path(outdir), plan)
-
-
 def _mark_batches_done(outdir: Path, plan: Plan) -> None:
     """Write ``batch_BBB.done`` (make's target) for each batch whose samples are done."""
     for b, ks in enumerate(plan.batches):
         if all(_sample_done(outdir, k) for k in ks):
             write_text(outdir / "samples" / f"batch_{b:03d}.done", "".join(f"{k}\n" for k in ks))
+
+
+sample_done, mark_batches_done = _sample_done, _mark_batches_done  # public (cluster)
 
 
 def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: bool = False,

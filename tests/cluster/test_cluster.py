@@ -11,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -24,9 +25,11 @@ import povlens                                                    # noqa: E402
 from povlens.cli import main                                      # noqa: E402
 from povlens.cluster import bundle as bundle_module               # noqa: E402
 from povlens.cluster.bundle import make_bundle                    # noqa: E402
-from povlens.cluster.render import render_outdir_on_cluster       # noqa: E402
+from povlens.cluster.render import render_outdir_on_cluster, task_samples  # noqa: E402
 from povlens.errors import ParameterError, PovlensError, PovrayError  # noqa: E402
 from povlens.plan.schema import read_plan                         # noqa: E402
+from povlens.rendering.groups import write_group                  # noqa: E402
+from povlens.rendering.samples import render_batch                # noqa: E402
 from povlens.util.images import read_image, write_png_srgb        # noqa: E402
 
 from conftest import ROOT                                         # noqa: E402
@@ -104,9 +107,33 @@ def _timing(outdir: Path) -> dict:
     return json.loads((outdir / "samples" / "cluster.timing.json").read_text())
 
 
+def _close(image: np.ndarray, reference: np.ndarray) -> bool:
+    """Equal within the float32 rounding of the groups' partial sums."""
+    return (image.shape == reference.shape and reference.max() > 0
+            and np.abs(image - reference).max() <= 1e-5 * reference.max())
+
+
+def test_groups_through_two_workers_equal_the_local_render(cluster, local_image, tmp_path):
+    out = tmp_path / "o"
+    result = povlens.render(SCENE, outdir=out, scheduler=cluster.address, group_size=2,
+                            **RENDER)
+    image = read_image(result.image_exr)
+    assert _close(image, local_image)
+    stats = _timing(out)
+    assert stats["group_size"] == 2
+    assert sorted(t["ks"] for t in stats["tasks"]) == [[0, 1], [2, 3], [4, 5]]
+    assert all(t["in_flight"] >= 2 for t in stats["tasks"])   # several POV-Ray at once
+    files = sorted(p.name for p in (out / "samples").glob("group_*.npz"))
+    assert files == ["group_0000_0002.npz", "group_0002_0004.npz", "group_0004_0006.npz"]
+    assert not list((out / "samples").glob("sample_*.exr"))    # no per-sample images back
+    # povlens composite (here, no cluster) reads the group files: the same image
+    assert np.array_equal(povlens.composite(out).astype(np.float32), image)
+
+
 def test_a_render_through_two_workers_equals_the_local_render(cluster, local_image, tmp_path):
     out = tmp_path / "o"
-    result = povlens.render(SCENE, outdir=out, scheduler=cluster.address, **RENDER)
+    result = povlens.render(SCENE, outdir=out, scheduler=cluster.address, group_size=1,
+                            **RENDER)
     image = read_image(result.image_exr)
     assert image.shape == local_image.shape and image.max() > 0
     assert np.array_equal(image, local_image)        # bit for bit
@@ -125,8 +152,8 @@ def test_the_cli_renders_on_the_cluster_from_the_environment(cluster, local_imag
     args = ["render", str(SCENE), "--lens", "dgauss.50mm", "--focus", "4", "--method", "mesh",
             "--samples", "6", "--width", "80", "--height", "60", "-q", "-o", str(out)]
     assert main(args) == 0
-    assert (out / "samples" / "cluster.timing.json").exists()
-    assert np.array_equal(read_image(out / "image.exr"), local_image)
+    assert _timing(out)["group_size"] == 2                 # 6 samples, 2 workers: 3 groups
+    assert _close(read_image(out / "image.exr"), local_image)
 
 
 def test_a_worker_killed_mid_render_loses_nothing(cluster, local_image, tmp_path):
@@ -140,22 +167,28 @@ def test_a_worker_killed_mid_render_loses_nothing(cluster, local_image, tmp_path
     with Client(cluster.address, timeout="30s", set_as_default=False) as monitor:
         [addr] = [a for a, pid in monitor.run(os.getpid).items() if pid == victim.pid]
 
-        def on_sample(task):
-            # at the first sample back, the victim is rendering one: kill it then
-            if not in_flight:
-                in_flight.extend(monitor.processing([addr])[addr])
-                assert victim.poll() is None
-                os.killpg(victim.pid, signal.SIGKILL)
-                victim.wait(timeout=30)
+        def kill_when_busy():
+            # as soon as the victim is rendering a group, kill it
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and not in_flight:
+                busy = monitor.processing([addr]).get(addr, [])
+                if busy:
+                    in_flight.extend(busy)
+                    os.killpg(victim.pid, signal.SIGKILL)
+                    victim.wait(timeout=30)
+                time.sleep(0.01)
 
-        _, stats = render_outdir_on_cluster(out, cluster.address, on_sample=on_sample)
-    assert in_flight, "the victim had no sample in flight when it was killed"
+        killer = threading.Thread(target=kill_when_busy, daemon=True)
+        killer.start()
+        _, stats = render_outdir_on_cluster(out, cluster.address, group_size=2)
+        killer.join(timeout=60)
+    assert in_flight, "the victim had no group in flight when it was killed"
     tasks = stats["tasks"]
-    lost = {int(key.split("-")[2]) for key in in_flight}
-    # the victim's samples in flight were rendered again, by the others
-    assert all(t["pid"] != victim.pid for t in tasks if t["k"] in lost)
-    assert sorted(t["k"] for t in tasks) == list(range(RENDER["samples"]))
-    assert np.array_equal(read_image(out / "image.exr"), local_image)
+    lost = {tuple(task_samples(key)) for key in in_flight}
+    # the victim's groups in flight were rendered again, by the others
+    assert lost and all(t["pid"] != victim.pid for t in tasks if tuple(t["ks"]) in lost)
+    assert sorted(t["ks"] for t in tasks) == [[0, 1], [2, 3], [4, 5]]
+    assert _close(read_image(out / "image.exr"), local_image)
 
 
 def _scene_with_include_and_map(folder: Path) -> Path:
@@ -181,17 +214,25 @@ def test_a_scene_with_an_include_file_and_an_image_map_renders_on_the_workers(cl
     scene = _scene_with_include_and_map(tmp_path / "scene")
     opts = dict(lens="dgauss.50mm", focus=6, method="mesh", samples=3, width=80, height=60)
     local = povlens.render(scene, outdir=tmp_path / "scene" / "local", **opts)
-    dist = povlens.render(scene, outdir=tmp_path / "dist", scheduler=cluster.address, **opts)
-    a, b = read_image(local.image_exr), read_image(dist.image_exr)
+    povlens.convert(scene, outdir=tmp_path / "dist", **opts)
+    base = cluster.tmp / "workers" / "povlens-cluster"
+    replicas = []
+
+    def look(task):        # while the render runs: the workers' copies
+        replicas.extend((r, (r / "parts" / "look.inc").is_file()
+                         and (r / "maps" / "checker.png").is_file() and not (r / "local").exists())
+                        for r in base.glob("*/" + str(tmp_path / "scene").lstrip("/")))
+
+    exr, stats = render_outdir_on_cluster(tmp_path / "dist", cluster.address, on_sample=look)
+    a, b = read_image(local.image_exr), read_image(exr)
     assert b[..., 0].max() > 0.5 and b[..., 2].max() > 0.5     # the map's two colours
-    assert np.array_equal(a, b)
+    assert _close(b, a)
     # the workers rendered from their own copy, which holds the include and the map
     # (and not the local render folder inside the scene's folder)
-    replicas = list((cluster.tmp / "workers" / "povlens-cluster").glob("*/" + str(
-        tmp_path / "scene").lstrip("/")))
-    assert replicas
-    assert any((r / "parts" / "look.inc").is_file() and (r / "maps" / "checker.png").is_file()
-               and not (r / "local").exists() for r in replicas)
+    assert replicas and all(complete for _, complete in replicas)
+    # and deleted it when the render ended
+    key = make_bundle(tmp_path / "dist", read_plan(tmp_path / "dist"))[0]
+    assert not (base / key).exists() and not any(r.exists() for r, _ in replicas)
 
 
 def test_an_interrupted_cluster_render_resumes_here(cluster, local_image, tmp_path):
@@ -200,16 +241,34 @@ def test_an_interrupted_cluster_render_resumes_here(cluster, local_image, tmp_pa
     done = []
 
     def interrupt(task):
-        done.append(task["k"])
-        if len(done) == 3:
-            raise KeyboardInterrupt
+        done.append(task["ks"])
+        raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        render_outdir_on_cluster(out, cluster.address, on_sample=interrupt)
-    assert len(list((out / "samples").glob("sample_*.exr"))) == 3
+        render_outdir_on_cluster(out, cluster.address, on_sample=interrupt, group_size=2)
+    [ks] = done
+    assert [p.name for p in (out / "samples").glob("group_*.npz")] == [
+        f"group_{ks[0]:04d}_{ks[-1] + 1:04d}.npz"]
     result = povlens.render(SCENE, outdir=out, **RENDER)         # locally, resumed
-    assert json.loads((out / "samples" / "render.timing.json").read_text())["samples"] == 3
-    assert np.array_equal(read_image(result.image_exr), local_image)
+    # the group's samples were not rendered again
+    assert json.loads((out / "samples" / "render.timing.json").read_text())["samples"] == 4
+    assert not any((out / "samples" / f"sample_{k:04d}.exr").exists() for k in ks)
+    assert _close(read_image(result.image_exr), local_image)
+
+
+def test_a_cluster_render_resumes_from_samples_and_groups(cluster, local_image, tmp_path):
+    out = tmp_path / "o"
+    povlens.convert(SCENE, outdir=out, batch_size=2, **RENDER)
+    assert render_batch(out, 1) == [1, 4]                  # samples 1 and 4 rendered here
+    _, stats = render_outdir_on_cluster(out, cluster.address, group_size=4)
+    # only what was missing, in runs of consecutive samples
+    assert sorted(t["ks"] for t in stats["tasks"]) == [[0], [2, 3], [5]]
+    assert _close(read_image(out / "image.exr"), local_image)
+    _, stats = render_outdir_on_cluster(out, cluster.address)      # all done: no task
+    assert stats["samples"] == 0
+    write_group(out, [2, 3], b"not a group file")          # damaged: an error naming it
+    with pytest.raises(PovlensError, match="group_0002_0004.npz: cannot read"):
+        povlens.composite(out)
 
 
 def test_shared_dir_writes_the_samples_in_place_through_a_client(cluster, local_image,
@@ -220,7 +279,7 @@ def test_shared_dir_writes_the_samples_in_place_through_a_client(cluster, local_
         povlens.render(SCENE, outdir=out, scheduler=client, shared_dir=True, **RENDER)
         assert client.status == "running"                # the caller's client: left open
     assert _timing(out)["bundle_bytes"] == 0
-    assert np.array_equal(read_image(out / "image.exr"), local_image)
+    assert _close(read_image(out / "image.exr"), local_image)
 
 
 def test_a_scheduler_without_workers_is_a_clear_error(tmp_path):
@@ -269,11 +328,18 @@ def test_a_scheduler_that_does_not_answer_is_a_clear_error(tmp_path, capsys):
     assert f"--scheduler {address}: no Dask scheduler answered within 1 s" in err
     assert "Traceback" not in err and time.perf_counter() - t0 < 10
     assert not (tmp_path / "c" / "plan.json").exists()      # asked before converting
+    # a focus pull too: before its first frame
+    args[args.index("--focus") + 1] = "2:6"
+    args[args.index("-o") + 1] = str(tmp_path / "f")
+    assert main(args + ["--frames", "2"]) == 2
+    assert "no Dask scheduler answered" in capsys.readouterr().err
+    assert not (tmp_path / "f" / "frames.json").exists()
 
 
 @pytest.mark.parametrize("extra, message", [
     (["--scheduler", "nonsense"], "--scheduler nonsense: not a scheduler address"),
     (["--shared-dir"], "--shared-dir needs --scheduler"),
+    (["--group-size", "2"], "--group-size needs --scheduler"),
 ])
 def test_bad_cluster_options_through_the_cli(tmp_path, capsys, monkeypatch, extra, message):
     monkeypatch.delenv("POVLENS_SCHEDULER", raising=False)
@@ -285,10 +351,33 @@ def test_bad_cluster_options_through_the_cli(tmp_path, capsys, monkeypatch, extr
     assert message in err and "Traceback" not in err
 
 
+def test_a_group_size_below_one_is_refused_by_the_cli(tmp_path, capsys):
+    args = ["render", str(SCENE), "--lens", "dgauss.50mm", "--focus", "4", "-o",
+            str(tmp_path / "c"), "--scheduler", "tcp://127.0.0.1:1", "--group-size", "0"]
+    with pytest.raises(SystemExit) as e:               # argparse: usage, one error line
+        main(args)
+    assert e.value.code == 2
+    assert "--group-size: '0' must be at least 1" in capsys.readouterr().err
+
+
 def test_shared_dir_without_a_scheduler_through_the_api(tmp_path, monkeypatch):
     monkeypatch.delenv("POVLENS_SCHEDULER", raising=False)
     with pytest.raises(ParameterError, match="shared_dir=True needs 'scheduler'"):
         povlens.render(SCENE, outdir=tmp_path / "o", shared_dir=True, **RENDER)
+    with pytest.raises(ParameterError, match="group_size=... needs 'scheduler'"):
+        povlens.render(SCENE, outdir=tmp_path / "o", group_size=2, **RENDER)
+    with pytest.raises(ParameterError, match="group_size=... needs 'scheduler'"):
+        povlens.render_frames(SCENE, outdir=tmp_path / "f", group_size=2, frames=2,
+                              focus=(2, 4), **{k: v for k, v in RENDER.items() if k != "focus"})
+
+
+def test_a_bad_group_size_is_a_clear_error(cluster, tmp_path):
+    out = tmp_path / "o"
+    povlens.convert(SCENE, outdir=out, lens="dgauss.50mm", focus=4, method="mesh", samples=2,
+                    width=32, height=24)
+    with pytest.raises(ParameterError, match="group_size=0: not a whole number >= 1") as e:
+        render_outdir_on_cluster(out, cluster.address, group_size=0)
+    assert e.value.parameter == "group_size"
 
 
 def test_a_scene_folder_past_the_limit_asks_for_shared_dir(tmp_path, monkeypatch):
@@ -320,4 +409,26 @@ def test_a_dispersion_render_on_the_cluster_equals_the_local_one(cluster, tmp_pa
                 dispersion=True)
     local = povlens.render(SCENE, outdir=tmp_path / "local", **opts)
     dist = povlens.render(SCENE, outdir=tmp_path / "dist", scheduler=cluster.address, **opts)
-    assert np.array_equal(read_image(local.image_exr), read_image(dist.image_exr))
+    assert _close(read_image(dist.image_exr), read_image(local.image_exr))
+
+
+def test_a_focus_pull_on_the_cluster_equals_the_local_pull(cluster, tmp_path, capsys,
+                                                           monkeypatch):
+    monkeypatch.delenv("POVLENS_SCHEDULER", raising=False)
+    opts = dict(lens="dgauss.50mm", method="mesh", samples=4, width=48, height=36)
+    local = povlens.render_frames(SCENE, outdir=tmp_path / "local", focus=(2, 6), frames=2,
+                                  **opts)
+    args = ["render", str(SCENE), "--lens", "dgauss.50mm", "--focus", "2:6", "--frames", "2",
+            "--method", "mesh", "--samples", "4", "--width", "48", "--height", "36",
+            "-o", str(tmp_path / "dist"), "--scheduler", cluster.address, "--group-size", "1"]
+    assert main(args) == 0
+    assert "image.0002.exr" in capsys.readouterr().out
+    a = [read_image(p) for p in local.images_exr]
+    b = [read_image(tmp_path / "dist" / f"image.{i:04d}.exr") for i in (1, 2)]
+    assert not np.array_equal(a[0], a[1])                  # the focus moved
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))  # group size 1: bit for bit
+    for i in (1, 2):                                        # each frame went to the cluster
+        assert _timing(tmp_path / "dist" / f"frame-{i:04d}")["samples"] == 4
+    grouped = povlens.render_frames(SCENE, outdir=tmp_path / "api", focus=(2, 6), frames=2,
+                                    scheduler=cluster.address, **opts)
+    assert all(_close(read_image(p), x) for p, x in zip(grouped.images_exr, a))
