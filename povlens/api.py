@@ -128,6 +128,19 @@ def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | 
                                     {"method": method, **options}))
 
 
+def _render_overrides(method, samples, width, height, options) -> dict:
+    """The :class:`ConvertOptions` fields a render call sets (a given ``samples`` is kept,
+    not chosen by ``auto``)."""
+    overrides = {"method": method, **options}
+    if samples is not None:
+        overrides.update(samples=int(samples), auto_samples=False)
+    if width is not None:
+        overrides["width"] = int(width)
+    if height is not None:
+        overrides["height"] = int(height)
+    return overrides
+
+
 @dataclasses.dataclass(frozen=True)
 class RenderResult:
     """What :func:`render` made: the plan and the images (linear EXR, sRGB PNG)."""
@@ -182,13 +195,7 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         from povlens.errors import ParameterError
         raise ParameterError("group_size", group_size, "group_size=... needs 'scheduler'",
                              "give the scheduler's address, or leave out 'group_size'")
-    overrides = {"method": method, **options}
-    if samples is not None:
-        overrides.update(samples=int(samples), auto_samples=False)
-    if width is not None:
-        overrides["width"] = int(width)
-    if height is not None:
-        overrides["height"] = int(height)
+    overrides = _render_overrides(method, samples, width, height, options)
     opts = _options(scene, lens, focus, outdir, overrides)
     if scheduler is not None:
         from povlens.cluster.render import convert_and_render_on_cluster
@@ -248,13 +255,7 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
         raise ParameterError("focus", focus, f"focus={focus!r}: a focus pull is (A, B) or a "
                              f"list of distances", "for one focus use povlens.render")
     values = focus_series(list(focus) if isinstance(focus, list) else tuple(focus), frames)
-    overrides = {"method": method, **options}
-    if samples is not None:
-        overrides.update(samples=int(samples), auto_samples=False)
-    if width is not None:
-        overrides["width"] = int(width)
-    if height is not None:
-        overrides["height"] = int(height)
+    overrides = _render_overrides(method, samples, width, height, options)
     opts = _options(scene, lens, values[0], outdir, overrides)
     scheduler = scheduler or os.environ.get("POVLENS_SCHEDULER") or None
     if scheduler is None and (shared_dir or group_size is not None):
