@@ -1,13 +1,14 @@
 """Field-mesh renders of stock scenes nobody here wrote (Debian's povray-examples).
 
     python3 benchmarks/stock_mesh_renders.py [--count 12] [--samples 8] [--size 640x480]
-        [--lens dgauss.50mm] [--timeout 120]
+        [--lens dgauss.50mm] [--timeout 120] [--extra "--aperture-blades 6 --dispersion ..."]
 
 Takes every k-th scene that planned in the last stock sweep
 (``benchmarks/results/stock_scenes.csv``, plan exit 0, POV-Ray rendering it), renders it with
 ``povlens render --method mesh`` (field meshes, the default) in the scene's folder, and
 reports per scene: exit status, wall time, the field meshes' grid and certified ray error
-(``plan.json``), whether the image is finite, and any traceback.  Results to stdout.
+(``plan.json``), whether the image is finite, and any traceback.  ``--extra`` adds options to
+every render (the lens-character options, ``--frames``).  Results to stdout.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ def main(argv=None) -> int:
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--lens", default="dgauss.50mm")
     ap.add_argument("--timeout", type=float, default=120)
+    ap.add_argument("--extra", default="", help="more povlens render options, one string")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     with open(ROOT / "benchmarks" / "results" / "stock_scenes.csv") as f:
@@ -50,7 +52,7 @@ def main(argv=None) -> int:
             out = Path(work) / f"s{i}"
             cmd = [sys.executable, "-m", "povlens", "render", scene.name, "--lens", args.lens,
                    "--method", "mesh", "--samples", str(args.samples), "--width", str(w),
-                   "--height", str(h), "-o", str(out), "-q"]
+                   "--height", str(h), "-o", str(out), "-q", *args.extra.split()]
             t0 = time.perf_counter()
             try:
                 r = subprocess.run(cmd, cwd=scene.parent, capture_output=True, text=True,
@@ -60,12 +62,14 @@ def main(argv=None) -> int:
                 code, err = "timeout", ""
             secs = time.perf_counter() - t0
             grid = error = finite = ""
-            if (out / "plan.json").exists():
-                fm = json.loads((out / "plan.json").read_text()).get("field_mesh")
+            plans = sorted(out.glob("plan.json")) or sorted(out.glob("frame-*/plan.json"))
+            if plans:
+                fm = json.loads(plans[0].read_text()).get("field_mesh")
                 if fm:
                     grid, error = f"{fm['grid'][0]}x{fm['grid'][1]}", f"{fm['max_ray_error_px']:.3f}"
-            if (out / "image.exr").exists():
-                finite = str(bool(np.isfinite(read_image(out / "image.exr")).all()))
+            images = sorted(out.glob("image*.exr"))       # image.exr, or a pull's image.NNNN.exr
+            if images:
+                finite = str(all(bool(np.isfinite(read_image(p)).all()) for p in images))
             last = err.strip().splitlines()[-1] if err.strip() else ""
             rows.append((name, code, secs, grid, error, finite, "Traceback" in err, last))
             print(f"{name:45s} exit {code!s:7s} {secs:6.1f} s  grid {grid:6s} ray error "
