@@ -12,7 +12,8 @@ Their negative lobes (r below ~540 nm, g below ~440 nm and above ~650 nm) are
 clipped: a channel collects light only where its own matching function is positive,
 so every weight is >= 0 and no pixel goes negative; an equal-energy spectrum still
 gives (1, 1, 1).  The CMFs come from colour-science (``colour.MSDS_CMFS``, sRGB's
-``matrix_XYZ_to_RGB``), imported only here, when a dispersion plan is rendered.
+``matrix_XYZ_to_RGB``), imported only here, when a dispersion plan is rendered; the
+tables made from them are kept in the user's cache folder (:func:`table_cache_path`).
 
 The lambda_k are importance-sampled from p(lambda) = (w_r + w_g + w_b) / 3: u_k is
 the base-3 radical inverse of k (independent of the Sobol' pupil points and
@@ -28,14 +29,20 @@ dispersion (:func:`channel_factors`,
 from __future__ import annotations
 
 import functools
+import importlib.metadata
+import importlib.util
+import io
+import os
+from pathlib import Path
 
 import numpy as np
 
 from povlens.errors import PovlensError
 from povlens.lens.dispersion import BAND_NM
+from povlens.util.files import write_bytes
 
 __all__ = ["colour_weights", "sample_wavelength_nm", "channel_factors",
-           "plan_channel_factors", "CMF_SOURCE"]
+           "plan_channel_factors", "CMF_SOURCE", "tables_from_colour_science", "table_cache_path"]
 
 #: Share of every channel each sample keeps whatever its wavelength (channel_factors).
 FACTOR_FLOOR = 0.01
@@ -45,10 +52,16 @@ CMF_SOURCE = ("CIE 1931 2-degree colour-matching functions (colour-science) to l
               "negative lobes clipped")
 
 
-@functools.lru_cache(maxsize=1)
-def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def table_cache_path(version: str) -> Path:
+    """Where the band's tables made from colour-science ``version`` are kept
+    (``$XDG_CACHE_HOME/povlens/``): importing colour-science costs about 1 s a process."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "povlens" / f"cmf-srgb-{version}-{BAND_NM[0]:g}-{BAND_NM[1]:g}nm.npz"
+
+
+def tables_from_colour_science() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(M,) wavelengths nm at 1 nm over the band, (M, 3) normalised weights w_c,
-    (M,) cumulative distribution of p."""
+    (M,) cumulative distribution of p, computed with colour-science."""
     try:
         import colour
     except ImportError:
@@ -64,6 +77,41 @@ def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     p = w.mean(axis=1)
     cdf = np.concatenate(([0.0], np.cumsum(0.5 * (p[1:] + p[:-1]) * np.diff(lam))))
     return lam, w, cdf / cdf[-1]
+
+
+def _colour_importable() -> bool:
+    """Whether ``import colour`` would find the package (without importing it)."""
+    try:
+        return importlib.util.find_spec("colour") is not None
+    except (ValueError, ImportError):        # e.g. sys.modules["colour"] is None
+        return False
+
+
+@functools.lru_cache(maxsize=1)
+def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`tables_from_colour_science`, from the user's cache when it holds them for
+    the installed colour-science (its version read without importing it)."""
+    try:
+        version = importlib.metadata.version("colour-science")
+    except importlib.metadata.PackageNotFoundError:
+        version = None
+    if version is not None and _colour_importable():
+        path = table_cache_path(version)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                return z["lam"], z["w"], z["cdf"]
+        except (OSError, ValueError, KeyError):
+            pass
+    lam, w, cdf = tables_from_colour_science()
+    if version is not None:
+        buf = io.BytesIO()
+        np.savez(buf, lam=lam, w=w, cdf=cdf)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_bytes(path, buf.getvalue())
+        except OSError:
+            pass                     # no cache folder: compute again next time
+    return lam, w, cdf
 
 
 def colour_weights(wavelength_nm) -> np.ndarray:

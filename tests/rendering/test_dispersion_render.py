@@ -107,7 +107,8 @@ def test_spectral_composite_keeps_grey_exactly_grey(tmp_path):
         np.testing.assert_allclose(img[..., c], expect, rtol=1e-6, atol=1e-12)
 
 
-def test_missing_colour_science_is_a_clear_error(monkeypatch):
+def test_missing_colour_science_is_a_clear_error(monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))     # a cache is no colour-science
     spectral._tables.cache_clear()
     monkeypatch.setitem(sys.modules, "colour", None)
     with pytest.raises(PovlensError, match="colour-science"):
@@ -215,6 +216,7 @@ def test_composite_without_colour_science_exits_2(files, monkeypatch, capsys):
         render(files, "grey.pov", "lens.dat", "grey", "--dispersion", "--samples", "16")
     spectral._tables.cache_clear()
     monkeypatch.setitem(sys.modules, "colour", None)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(files / "no-cache"))
     rc = main(["composite", str(files / "grey")])
     spectral._tables.cache_clear()
     err = capsys.readouterr().err
@@ -254,3 +256,16 @@ def test_auto_picks_mesh_when_the_colour_is_visible(files):
     assert kept.method == "focal-blur" and "within the tolerance" in kept.reasons[-2]
     assert colour_decision(dataclasses.replace(opts, dispersion=False), lens, plan,
                            view) is view
+
+
+def test_cached_colour_tables_equal_colour_sciences(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    spectral._tables.cache_clear()
+    first = spectral._tables()                          # made with colour-science, cached
+    assert list((tmp_path / "povlens").glob("cmf-srgb-*.npz"))
+    spectral._tables.cache_clear()
+    again = spectral._tables()                          # read from the cache
+    spectral._tables.cache_clear()
+    for a, b, c in zip(first, again, spectral.tables_from_colour_science()):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a, c)
