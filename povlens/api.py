@@ -128,6 +128,18 @@ def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | 
                                     {"method": method, **options}))
 
 
+def _scheduler_of(scheduler, shared_dir: bool, group_size: int | None):
+    """The scheduler to render on (the argument, else ``POVLENS_SCHEDULER``, else None:
+    here); ``shared_dir`` and ``group_size`` need one."""
+    from povlens.errors import ParameterError
+    scheduler = scheduler or os.environ.get("POVLENS_SCHEDULER") or None
+    if scheduler is None and (shared_dir or group_size is not None):
+        name, given = ("shared_dir", "True") if shared_dir else ("group_size", "...")
+        raise ParameterError(name, shared_dir or group_size, f"{name}={given} needs 'scheduler'",
+                             f"give the scheduler's address, or leave out '{name}'")
+    return scheduler
+
+
 def _render_overrides(method, samples, width, height, options) -> dict:
     """The :class:`ConvertOptions` fields a render call sets (a given ``samples`` is kept,
     not chosen by ``auto``)."""
@@ -186,15 +198,7 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         An interrupted render resumes when called again with the same arguments.
     """
     from povlens.rendering.samples import convert_and_render
-    scheduler = scheduler or os.environ.get("POVLENS_SCHEDULER") or None
-    if shared_dir and scheduler is None:
-        from povlens.errors import ParameterError
-        raise ParameterError("shared_dir", shared_dir, "shared_dir=True needs 'scheduler'",
-                             "give the scheduler's address, or leave out 'shared_dir'")
-    if group_size is not None and scheduler is None:
-        from povlens.errors import ParameterError
-        raise ParameterError("group_size", group_size, "group_size=... needs 'scheduler'",
-                             "give the scheduler's address, or leave out 'group_size'")
+    scheduler = _scheduler_of(scheduler, shared_dir, group_size)
     overrides = _render_overrides(method, samples, width, height, options)
     opts = _options(scene, lens, focus, outdir, overrides)
     if scheduler is not None:
@@ -257,11 +261,7 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
     values = focus_series(list(focus) if isinstance(focus, list) else tuple(focus), frames)
     overrides = _render_overrides(method, samples, width, height, options)
     opts = _options(scene, lens, values[0], outdir, overrides)
-    scheduler = scheduler or os.environ.get("POVLENS_SCHEDULER") or None
-    if scheduler is None and (shared_dir or group_size is not None):
-        name = "shared_dir" if shared_dir else "group_size"
-        raise ParameterError(name, shared_dir or group_size, f"{name}=... needs 'scheduler'",
-                             f"give the scheduler's address, or leave out '{name}'")
+    scheduler = _scheduler_of(scheduler, shared_dir, group_size)
     if scheduler is not None:
         from povlens.cluster.render import render_frames_on_cluster
         records = render_frames_on_cluster(opts, values, scheduler, shared_dir=shared_dir,

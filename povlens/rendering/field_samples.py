@@ -106,10 +106,7 @@ def _npy(a: np.ndarray) -> bytes:
 
 
 def _pack(mask: np.ndarray) -> bytes:
-    import io
-    buf = io.BytesIO()
-    np.save(buf, np.packbits(mask, axis=1), allow_pickle=False)
-    return buf.getvalue()
+    return _npy(np.packbits(mask, axis=1))
 
 
 def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path) -> bool:
@@ -162,7 +159,7 @@ def field_sample_weight(plan: Plan, table, outdir: Path, k: int) -> np.ndarray:
     pupil, jitter = field_sample(plan, k)
     w = field_weight(film, table.plane_z_mm, pupil, sample_domain_radius_mm(plan, k),
                      jitter, passed)
-    if getattr(plan.inputs, "aperture_image", None):   # grey mask: w times transmission
+    if plan.inputs.aperture_image:                        # grey mask: w times transmission
         tpath = transmission_path(outdir, k)
         try:
             t = np.load(tpath, allow_pickle=False)
