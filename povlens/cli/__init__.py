@@ -23,6 +23,7 @@ import warnings
 from povlens import __version__
 from povlens.cli.flags import error_text, with_flags
 from povlens.errors import PovlensError, PovlensWarning
+from povlens.util.signals import kill_descendants
 
 #: Set to 1 to see the traceback of an unexpected error instead of a one-line message.
 DEBUG_ENV_VAR = "POVLENS_DEBUG"
@@ -121,9 +122,11 @@ def run() -> None:
     itself with SIGINT at exit, whatever the exit code, once a KeyboardInterrupt has
     escaped any ``exec`` of a string (a dataclass being made, say) during the run (its
     ``unhandled_keyboard_interrupt`` flag stays set), which would turn 130 and 143
-    into death by SIGINT.  The command's clean-up has run by then."""
+    into death by SIGINT.  The command's clean-up has run by then; any process it
+    left below this one is killed."""
     code = main()
     if code in (130, 143):
+        kill_descendants()
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)

@@ -48,6 +48,7 @@ from povlens.pov.executable import ENV_VAR, find_povray
 from povlens.pov.povray_options import PovrayOptions, as_povray_options
 from povlens.pov.povray_output import error_in_wrapper, povray_error_text
 from povlens.util.files import atomic_output
+from povlens.util.signals import interrupts_deferred
 
 __all__ = [
     "pixel_range_args",
@@ -282,25 +283,35 @@ def start_povray(cmd: Sequence[str], cwd: str | os.PathLike, stderr: IO, *, nice
         If the program cannot be started.
     """
     prefix, preexec = _lower_priority(nice, idle)
+    proc = None
     try:
-        return subprocess.Popen(
-            prefix + list(cmd),
-            cwd=cwd,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=stderr,
-            preexec_fn=preexec,
-        )
-    except FileNotFoundError:
-        raise PovrayError(
-            f"POV-Ray at {cmd[0]} could not be started",
-            f"check the installation or set {ENV_VAR} to a working povray",
-        ) from None
-    except OSError as exc:
-        raise PovrayError(
-            f"cannot run POV-Ray ({cmd[0]}) in {cwd}: {exc.strerror or exc}",
-            "check that the folder exists and the program is executable",
-        ) from None
+        # An interrupt inside Popen, after the fork, would lose the child (Popen has
+        # no handle to return): hold it until the process is ours, then stop it.
+        with interrupts_deferred():
+            proc = subprocess.Popen(
+                prefix + list(cmd),
+                cwd=cwd,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=stderr,
+                preexec_fn=preexec,
+            )
+        return proc
+    except BaseException as exc:
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+        if isinstance(exc, FileNotFoundError):
+            raise PovrayError(
+                f"POV-Ray at {cmd[0]} could not be started",
+                f"check the installation or set {ENV_VAR} to a working povray",
+            ) from None
+        if isinstance(exc, OSError):
+            raise PovrayError(
+                f"cannot run POV-Ray ({cmd[0]}) in {cwd}: {exc.strerror or exc}",
+                "check that the folder exists and the program is executable",
+            ) from None
+        raise
 
 
 #: No POV-Ray run has written its image this soon after its start (s): POV-Ray's
@@ -445,6 +456,7 @@ def start_render(
     executable = find_povray()
     workdir = Path(cwd).absolute() if cwd is not None else pov_path.parent
     stack = contextlib.ExitStack()
+    proc = None
     try:
         tmp = stack.enter_context(atomic_output(out_path))
         # the fatal-error log: a bare name, written into the image's folder
@@ -462,12 +474,15 @@ def start_render(
         cmd = povray_command(executable, inp, outp, switches, error_log=log.name)
         err = stack.enter_context(tempfile.TemporaryFile())
         proc = start_povray(cmd, workdir, err, nice=nice, idle=idle)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        return RenderJob(proc, stack, cmd, workdir, pov_path, out_path, tmp, log, err,
+                         timeout, deadline)
     except BaseException as exc:
+        if proc is not None:        # an interrupt before the job was made
+            proc.kill()
+            proc.wait()
         stack.__exit__(type(exc), exc, exc.__traceback__)
         raise
-    deadline = None if timeout is None else time.monotonic() + timeout
-    return RenderJob(proc, stack, cmd, workdir, pov_path, out_path, tmp, log, err,
-                     timeout, deadline)
 
 
 class RenderJob:

@@ -65,6 +65,7 @@ from povlens.rendering.field_samples import (field_sample_weight, mask_path, pla
                                              write_field_sample)
 from povlens.rendering.groups import group_sums, grouped
 from povlens.util.files import write_text
+from povlens.util.signals import interrupts_deferred
 from povlens.lens.aperture_shape import shaped_lens
 from povlens.lens.paraxial import stopped_down
 from povlens.pov.povray_output import error_in_wrapper, povray_error_text
@@ -278,9 +279,9 @@ class _SampleRenders:
                 extra_args=[*MESH_SWITCHES, f"Declare=PovlensFrame={k}",
                             *film_row_args(pv, self.plan.rows_of_sample(k))])
             cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
-            with open(tmp / "stderr.txt", "w") as err:
+            with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:
                 proc = start_povray(cmd, self.samples, err)
-            self.running[k] = (proc, tmp, time.perf_counter())
+                self.running[k] = (proc, tmp, time.perf_counter())   # abort() sees it
         except BaseException:
             if k in self.running:
                 raise           # tracked: abort() stops it and removes the folder

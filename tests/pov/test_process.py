@@ -333,3 +333,48 @@ def test_a_cancelled_render_leaves_no_render_state_file(tmp_path):
         time.sleep(0.05)
     job.cancel()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["slow.pov"]
+
+
+def test_an_interrupt_inside_popen_stops_the_child_it_started(monkeypatch, tmp_path):
+    """A Ctrl-C that lands inside Popen after the fork (Popen then has no handle to
+    return) used to leave POV-Ray running: it is held until the process is known,
+    then the process is killed and the interrupt raised."""
+    import signal
+    import subprocess
+    from povlens.pov import process
+    started = []
+    real_popen = subprocess.Popen
+
+    def popen_then_interrupted(*args, **kwargs):
+        proc = real_popen(["sleep", "30"], stdin=subprocess.DEVNULL)
+        started.append(proc)
+        signal.raise_signal(signal.SIGINT)      # arrives while Popen has not returned
+        return proc
+
+    monkeypatch.setattr(process.subprocess, "Popen", popen_then_interrupted)
+    with open(tmp_path / "err.txt", "w") as err, pytest.raises(KeyboardInterrupt):
+        process.start_povray(["povray"], tmp_path, err)
+    assert len(started) == 1 and started[0].poll() == -signal.SIGKILL
+
+
+def test_kill_descendants_reaches_grandchildren(tmp_path):
+    """The last step of an interrupted command: nothing started below it survives."""
+    import subprocess
+    import sys
+    code = ("import subprocess, time\n"
+            "from povlens.util.signals import descendants, kill_descendants\n"
+            "subprocess.Popen(['sh', '-c', 'sleep 60 & sleep 60 & wait'])\n"
+            "time.sleep(0.5)\n"
+            "found = descendants()\n"
+            "kill_descendants()\n"
+            "print(' '.join(map(str, found)))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=30, check=True).stdout.split()
+    assert len(out) == 3                       # sh and its two sleeps
+    time.sleep(0.3)
+    for pid in map(int, out):
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                assert f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+        except FileNotFoundError:
+            pass                               # gone and reaped
