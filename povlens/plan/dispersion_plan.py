@@ -3,11 +3,13 @@
 A lens with Abbe numbers (:func:`povlens.lens.dispersion.has_abbe_numbers`) gets
 ``plan.dispersion``: its lateral colour (F against C chief-ray landing, pixels,
 across the field) and longitudinal colour (paraxial focus shift, mm), measured by
-:func:`povlens.lens.dispersion.chromatic_aberration`.  Only mesh plans with field
-meshes render the colour (``inputs.dispersion`` True): each lens sample is traced
-at its own wavelength (:mod:`povlens.rendering.spectral`), and the pupil disc
-the samples' pupil points are drawn from is enlarged to hold every wavelength's
-pass region.  Otherwise a note says why the render shows none.
+:func:`povlens.lens.dispersion.chromatic_aberration`.  Mesh plans render the colour
+(``inputs.dispersion`` True): each lens sample is traced at its own wavelength
+(:mod:`povlens.rendering.spectral`), and what the samples' pupil points are drawn
+from is enlarged to hold every wavelength's pass region: the field meshes' pupil
+disc, or for per-pixel meshes the exit-pupil table's polygons (``pupil_dilation``,
+one factor per knot: :mod:`povlens.pupil.band_table`).  Other methods render none,
+and a note says so.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import dataclasses
 from povlens.lens.dispersion import (BAND_NM, chromatic_aberration, disperses,
                                      has_abbe_numbers, lens_at_wavelength, pass_radius_mm)
 from povlens.plan.decision import MIN_SAMPLES
+from povlens.pupil.band_table import band_dilation
 from povlens.pupil.field import DISC_MARGIN
 
 __all__ = ["apply_dispersion", "colour_decision", "disc_radius_mm", "COLOUR_MODEL"]
@@ -74,8 +77,10 @@ def apply_dispersion(opts, plan, lens, table) -> None:
                       f"{opts.method} render shows none ({colour})")
         return
     if plan.field_mesh is None:
-        plan.add_note(f"--dispersion is rendered with field meshes only; these per-pixel "
-                      f"meshes render the d line ({colour})")
+        # per-pixel meshes sample the d-line table grown to hold the band's pass regions
+        factors = band_dilation(table, [lens_at_wavelength(lens, lam) for lam in BAND_NM])
+        info.update(rendered=True, pupil_dilation=[float(f) for f in factors])
+        plan.inputs = dataclasses.replace(plan.inputs, dispersion=True)
         return
     fm = plan.field_mesh
     field_radius = max(film.max_field_radius_mm, float(table.max_film_radius_mm))

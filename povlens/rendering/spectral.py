@@ -41,7 +41,7 @@ from povlens.errors import PovlensError
 from povlens.lens.dispersion import BAND_NM
 from povlens.util.files import write_bytes
 
-__all__ = ["colour_weights", "sample_wavelength_nm", "channel_factors",
+__all__ = ["band_sampler", "colour_weights", "sample_wavelength_nm", "channel_factors",
            "plan_channel_factors", "CMF_SOURCE", "tables_from_colour_science", "table_cache_path"]
 
 #: Share of every channel each sample keeps whatever its wavelength (channel_factors).
@@ -157,3 +157,25 @@ def plan_channel_factors(plan) -> np.ndarray | None:
         return None
     return channel_factors(int(plan.inputs.samples), plan.inputs.seed)
 
+
+
+def band_sampler(plan, table):
+    """What per-pixel meshes of a dispersion plan draw pupil points from: ``table``
+    (the d line's) with its polygons grown by the plan's ``pupil_dilation``
+    (:func:`povlens.pupil.band_table.band_table`), so that every wavelength's pass
+    region is held; ``table`` itself for other plans.
+
+    Raises
+    ------
+    PovlensError
+        If the plan's factors do not fit the table (the folder was changed by hand).
+    """
+    factors = (plan.dispersion or {}).get("pupil_dilation") if plan.inputs.dispersion else None
+    if factors is None:
+        return table
+    from povlens.pupil.band_table import band_table
+    try:
+        return band_table(table, factors)
+    except ValueError as e:
+        raise PovlensError(f"the plan's pupil_dilation does not fit its pupil table: {e}",
+                           "convert the scene again") from None

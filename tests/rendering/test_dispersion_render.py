@@ -123,9 +123,13 @@ def _mean_edge(profile, plateau):
     return float(np.sum(1.0 - profile / plateau))
 
 
-def test_edge_shows_the_tracers_lateral_colour(files):
-    img, _ = render(files, "edge.pov", "lens.dat", "edge", "--dispersion", "--samples", "32")
-    plan = read_plan(files / "edge")
+@pytest.mark.parametrize("ray_mesh", ["field", "pixel"])
+def test_edge_shows_the_tracers_lateral_colour(files, ray_mesh):
+    out = f"edge-{ray_mesh}"
+    img, _ = render(files, "edge.pov", "lens.dat", out, "--dispersion", "--samples", "32",
+                    "--ray-mesh", ray_mesh)
+    plan = read_plan(files / out)
+    assert (plan.field_mesh is None) == (ray_mesh == "pixel")
     assert plan.inputs.dispersion and plan.dispersion["rendered"]
     rows = img[54:66].mean(axis=0)                       # (W, 3) around the middle row
     g = rows[:, 1]
@@ -148,12 +152,15 @@ def test_edge_shows_the_tracers_lateral_colour(files):
     ok = np.isfinite(land)
     mean = [(w[ok, c] @ land[ok]) / w[ok, c].sum() for c in range(3)]
     predicted = (mean[2] - mean[0]) / pitch
+    print(f"{ray_mesh}: lateral colour measured {measured:.3f} px, predicted {predicted:.3f} px")
     assert predicted > 1.5                               # a colour fringe worth measuring
     assert measured == pytest.approx(predicted, rel=0.3)
 
 
-def test_grey_card_stays_grey(files):
-    img, _ = render(files, "grey.pov", "lens.dat", "grey", "--dispersion", "--samples", "16")
+@pytest.mark.parametrize("ray_mesh", ["field", "pixel"])
+def test_grey_card_stays_grey(files, ray_mesh):
+    img, _ = render(files, "grey.pov", "lens.dat", "grey" + "-px" * (ray_mesh == "pixel"),
+                    "--dispersion", "--samples", "16", "--ray-mesh", ray_mesh)
     lit = img[..., 1] > 0.05
     assert lit.mean() > 0.9
     for c in (0, 2):
@@ -202,13 +209,15 @@ def test_dispersion_in_plan_and_notes(files):
     assert "only the mesh method renders colour fringes" in r.stderr
     plan = read_plan(files / "fb")
     assert plan.inputs.dispersion is None and plan.dispersion["rendered"] is False
-    # per-pixel meshes: rendered at the d line, with a note
+    # per-pixel meshes: the exit-pupil table grown to hold the band (a factor per knot)
     r = povlens("convert", ROOT / "scenes" / "chart.pov", "--lens", "cooke.triplet.50mm",
                 "--dispersion", *SIZE, "--samples", "4", "--ray-mesh", "pixel",
                 "-o", files / "px")
     assert r.returncode == 0, r.stderr
-    assert "--dispersion is rendered with field meshes only" in r.stderr
-    assert read_plan(files / "px").inputs.dispersion is None
+    plan = read_plan(files / "px")
+    assert plan.inputs.dispersion and plan.field_mesh is None and plan.dispersion["rendered"]
+    factors = plan.dispersion["pupil_dilation"]
+    assert len(factors) > 1 and all(1.0 <= f < 1.1 for f in factors)
 
 
 def test_composite_without_colour_science_exits_2(files, monkeypatch, capsys):
@@ -225,12 +234,12 @@ def test_composite_without_colour_science_exits_2(files, monkeypatch, capsys):
 
 
 def test_report_shows_the_colour(files):
-    if not (files / "edge" / "plan.json").exists():
-        render(files, "edge.pov", "lens.dat", "edge", "--dispersion", "--samples", "32")
-    r = povlens("report", files / "edge", "-o", files / "report.html")
+    if not (files / "edge-field" / "plan.json").exists():
+        render(files, "edge.pov", "lens.dat", "edge-field", "--dispersion", "--samples", "32")
+    r = povlens("report", files / "edge-field", "-o", files / "report.html")
     assert r.returncode == 0, r.stderr
     page = (files / "report.html").read_text()
-    d = read_plan(files / "edge").dispersion
+    d = read_plan(files / "edge-field").dispersion
     assert f"colour (--dispersion, rendered): lateral up to {d['max_lateral_colour_px']:.3g} px" \
         in page
     assert "lateral colour (px)" in page
