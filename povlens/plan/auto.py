@@ -32,7 +32,8 @@ import numpy as np
 from povlens.lens.film import Film
 from povlens.plan.adaptive import adaptive_rows
 from povlens.plan.aperture import AUTO_NOTE, PINHOLE_NOTE, describe
-from povlens.plan.decision import decide, model_depths, probe_image_error, pupil_cut
+from povlens.plan.decision import (decide, model_depths, probe_image_error, pupil_cut,
+                                   shift_tilt_cos)
 from povlens.plan.depth_probe import DepthProbe, ProbeView, axial_depth, depth_limits, start_probe
 from povlens.plan.fixed import run_in_background, start_plan
 from povlens.plan.options import povray_options_of
@@ -168,7 +169,8 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
                vignetting=opts.vignetting, image_error=image_error,
                catseye=pupil_cut(profile), field_meshes=opts.ray_mesh == "field",
                aperture_shape=(describe(lens.aperture_shape) if lens.aperture_shape is not None
-                               else None))
+                               else None),
+               shift_tilt_cos=shift_tilt_cos(film.shift_mm, model.image_distance_mm))
     if lens.aperture_shape is not None:
         d.add_remark((AUTO_NOTE if d.method == "mesh" else PINHOLE_NOTE).format(
             what=describe(lens.aperture_shape)))

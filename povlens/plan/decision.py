@@ -70,7 +70,7 @@ from povlens.pupil.sampling import sobol_points
 
 __all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "shape_error_px", "vignetting_rmse", "shift_rmse",
            "probe_image_error", "film_radius_map_mm", "blur_range_px", "model_depths",
-           "samples_for_blur", "pupil_cut", "catseye_px", "catseye_rmse", "pixel_blur_mm",
+           "samples_for_blur", "pupil_cut", "shift_tilt_cos", "catseye_px", "catseye_rmse", "pixel_blur_mm",
            "SAMPLE_SPACING_PX", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "SAMPLE_RULE",
            "VIGNETTING_TOLERANCE", "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE",
            "CATSEYE_SAMPLES", "CATSEYE_RADII", "FIELD_MESH_SAMPLE_FACTOR"]
@@ -282,7 +282,8 @@ def _aperture_shape_check(aperture_shape: str | None, reasons: list, fb: list) -
 def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
            pixel_pitch_mm: float, tolerance_px: float = 0.5, vignetting: bool = True,
            image_error: dict | None = None, catseye: dict | None = None,
-           field_meshes: bool = False, aperture_shape: str | None = None) -> Decision:
+           field_meshes: bool = False, aperture_shape: str | None = None,
+           shift_tilt_cos: float = 1.0) -> Decision:
     """Choose the render method and its lens samples (pure; see the module docstring).
 
     Parameters
@@ -308,6 +309,10 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     aperture_shape : a few words on a shaped stop (iris, mask;
         :func:`povlens.plan.aperture.describe`), which focal_blur cannot draw: with a
         visible blur the render is mesh.
+    shift_tilt_cos : with a lens shift, cos of the angle between POV-Ray's tilted
+        ``direction`` and the axis (:func:`shift_tilt_cos`): focal_blur's lens disc is
+        perpendicular to that direction, so its blur is this much narrower along the
+        shift, and half the lost diameter counts against the budget.  1: no shift.
 
     Returns
     -------
@@ -363,6 +368,12 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
                 "error)", size_err / 2, tol),
           check("focal-blur: max blur shape error / 2 (the long axis reaches beyond the "
                 "disc by half on each side)", shape_err / 2, tol)]
+    if shift_tilt_cos < 1.0:
+        tilt_deg = math.degrees(math.acos(max(-1.0, min(1.0, shift_tilt_cos))))
+        numbers["shift_tilt_deg"] = tilt_deg
+        fb.append(check(f"focal-blur: lens shift: the disc, tilted {tilt_deg:.2g} deg, is "
+                        f"narrower along the shift by the blur x (1 - cos) / 2",
+                        b_max * (1.0 - shift_tilt_cos) / 2, tol))
     reasons.append("focal-blur: " + vig_text)
     _aperture_shape_check(aperture_shape, reasons, fb)
     floor_share = 0.0
@@ -398,6 +409,15 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     reasons.append(f"-> mesh: {why}; {mesh_samples} samples for a {b_max:.3g} px blur "
                    f"({SAMPLE_RULE}{field_text})")
     return Decision("mesh", mesh_samples, reasons, numbers)
+
+
+def shift_tilt_cos(shift_mm, image_distance_mm: float) -> float:
+    """cos of the tilt of POV-Ray's ``direction`` for a film shifted by ``shift_mm``
+    (x, y mm on the image plane) behind a thin lens of image distance
+    ``image_distance_mm`` (:func:`povlens.plan.fixed.off_axis_direction`); 1 unshifted."""
+    sx, sy = (float(v) for v in shift_mm)
+    v = abs(float(image_distance_mm))
+    return v / math.sqrt(v * v + sx * sx + sy * sy) if (sx or sy) else 1.0
 
 
 def pupil_cut(profile) -> dict:

@@ -189,3 +189,36 @@ def test_autofocus_point_of_a_shifted_frame(tmp_path):
     inputs = json.loads((tmp_path / "fa" / "plan.json").read_text())["inputs"]
     assert inputs["focus"] == pytest.approx(8.0, abs=0.02)
     assert inputs["shift_mm"] == [3.0, 6.0]
+
+
+def test_auto_counts_the_tilted_disc_of_focal_blur_against_the_budget(tmp_path):
+    """focal_blur's disc is perpendicular to the shifted direction: the decision adds
+    half the diameter it loses along the shift, blur x (1 - cos) / 2, to its checks."""
+    from povlens.plan.decision import decide, shift_tilt_cos
+    r = povlens("convert", CHART, *BASE, *SIZE, "--method", "focal-blur", "--shift-mm", "0,12",
+                "-o", tmp_path / "fb")
+    assert r.returncode == 0, r.stderr
+    plan = read_plan(tmp_path / "fb")
+    cos_t = shift_tilt_cos(plan.film.shift_mm, plan.thin_lens.image_distance_mm)
+    d = np.asarray(plan.povray_camera.direction, dtype=float)
+    assert cos_t == pytest.approx(1.0 / np.linalg.norm(d), rel=1e-12)   # the emitted tilt
+    assert shift_tilt_cos((0.0, 0.0), 50.0) == 1.0
+    # the decision's logic alone: a thin lens that matches the real one exactly (no
+    # distortion, size or shape error), a scene from 0.6 m to 1 m, focused at 8 m
+    err = dict(plan.model_error, max_distortion_px=0.0, max_blur_size_error_px=0.0,
+               blur_real_px=np.zeros_like(np.asarray(plan.model_error["blur_real_px"])),
+               elongation=np.ones_like(np.asarray(plan.model_error["elongation"])))
+    c = plan.thin_lens.centre_z_mm
+    kw = dict(near_z_mm=c + 600.0, far_z_mm=c + 1000.0, model=plan.thin_lens, model_error=err,
+              pixel_pitch_mm=plan.film.pixel_pitch_mm, vignetting=False)
+    blur = decide(tolerance_px=0.5, **kw).numbers["max_blur_px"]
+    lost = blur * (1 - cos_t) / 2               # px the rim moves along the shift
+    assert lost > 0.05
+    for tol, method in ((0.9 * lost, "mesh"), (1.1 * lost, "focal-blur")):
+        unshifted = decide(tolerance_px=tol, **kw)
+        assert unshifted.method == "focal-blur", unshifted.reasons
+        shifted = decide(tolerance_px=tol, shift_tilt_cos=cos_t, **kw)
+        assert shifted.method == method, (lost, shifted.reasons)
+        assert any("lens shift" in t and f"{lost:.3g} px" in t for t in shifted.reasons)
+    assert shifted.numbers["shift_tilt_deg"] == pytest.approx(
+        math.degrees(math.atan(12.0 / plan.thin_lens.image_distance_mm)), rel=1e-9)
