@@ -213,6 +213,7 @@ def test_auto_counts_the_tilted_disc_of_focal_blur_against_the_budget(tmp_path):
               pixel_pitch_mm=plan.film.pixel_pitch_mm, vignetting=False)
     blur = decide(tolerance_px=0.5, **kw).numbers["max_blur_px"]
     lost = blur * (1 - cos_t) / 2               # px the rim moves along the shift
+    print(f"blur {blur:.3f} px, tilt {math.degrees(math.acos(cos_t)):.3f} deg, lost {lost:.3f} px")
     assert lost > 0.05
     for tol, method in ((0.9 * lost, "mesh"), (1.1 * lost, "focal-blur")):
         unshifted = decide(tolerance_px=tol, **kw)
