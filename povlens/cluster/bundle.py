@@ -13,7 +13,9 @@ stored under its absolute path on the client (without the leading ``/``):
 On the worker it is unpacked once per machine into ``<tmp>/povlens-cluster/<key>/``
 (the *replica*), so every relative path (the wrappers' ``#include`` of the scene is
 relative to the render folder) is as on the client; the replica's ``plan.json`` is
-rewritten to name the replica's scene, lens and library folders.
+rewritten to name the replica's scene, lens and library folders.  The client's end
+deletes the replicas (:func:`remove_replica`); one whose end never came (a killed
+worker) is deleted once stale (:func:`prune_stale_replicas`).
 """
 
 from __future__ import annotations
@@ -26,12 +28,14 @@ import shutil
 import tarfile
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 from povlens.errors import ParameterError, PovlensError
 from povlens.plan.schema import Plan
 
-__all__ = ["BUNDLE_LIMIT_BYTES", "make_bundle", "replica_root", "in_replica", "remove_replica"]
+__all__ = ["BUNDLE_LIMIT_BYTES", "make_bundle", "replica_root", "in_replica", "remove_replica",
+           "prune_stale_replicas", "STALE_REPLICA_S"]
 
 #: Largest bundle sent (bytes, before compression); past it the render asks for
 #: ``shared_dir`` or a scene folder of its own.
@@ -158,8 +162,10 @@ def replica_root(key: str, data: bytes, outdir: str) -> Path:
     root = base / key
     with _lock:
         if root.is_dir():
+            _touch(root)                 # in use: not stale (prune_stale_replicas)
             return root
         base.mkdir(parents=True, exist_ok=True)
+        prune_stale_replicas(base)
         tmp = Path(tempfile.mkdtemp(prefix=f".{key[:12]}.", dir=base))
         try:
             with tarfile.open(fileobj=io.BytesIO(data), mode="r:gz") as tar:
@@ -176,6 +182,41 @@ def replica_root(key: str, data: bytes, outdir: str) -> Path:
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     return root
+
+
+#: A replica no task has used for this long (s) belongs to a render whose end this
+#: machine never heard of (its worker was killed, its client died): the next replica
+#: unpacked here deletes it.  Half-unpacked folders (``.KEY.*``) go after an hour.
+STALE_REPLICA_S = 24 * 3600.0
+STALE_UNPACK_S = 3600.0
+
+
+def _touch(path: Path) -> None:
+    try:
+        os.utime(path)
+    except OSError:
+        pass
+
+
+def prune_stale_replicas(base: Path, now: float | None = None) -> list[Path]:
+    """Delete the replicas in ``base`` untouched for :data:`STALE_REPLICA_S` and the
+    unpacking folders left for :data:`STALE_UNPACK_S`; returns what was deleted."""
+    now = time.time() if now is None else float(now)
+    gone = []
+    try:
+        entries = list(Path(base).iterdir())
+    except OSError:
+        return gone
+    for entry in entries:
+        limit = STALE_UNPACK_S if entry.name.startswith(".") else STALE_REPLICA_S
+        try:
+            stale = entry.is_dir() and now - entry.stat().st_mtime > limit
+        except OSError:
+            continue
+        if stale:
+            shutil.rmtree(entry, ignore_errors=True)
+            gone.append(entry)
+    return gone
 
 
 def remove_replica(key: str) -> bool:

@@ -380,6 +380,30 @@ def test_a_bad_group_size_is_a_clear_error(cluster, tmp_path):
     assert e.value.parameter == "group_size"
 
 
+def test_a_new_replica_deletes_the_stale_ones_a_killed_worker_left(tmp_path, monkeypatch):
+    """A replica whose render's end never reached this machine (its worker was killed)
+    is deleted when the next replica is unpacked, once untouched for a day; one in use
+    is touched by every task and stays."""
+    out = tmp_path / "o"
+    povlens.convert(SCENE, outdir=out, lens="dgauss.50mm", focus=4, method="mesh", samples=2,
+                    width=32, height=24)
+    key, data = make_bundle(out, read_plan(out))
+    monkeypatch.setattr(bundle_module.tempfile, "gettempdir", lambda: str(tmp_path / "tmp"))
+    base = tmp_path / "tmp" / "povlens-cluster"
+    old = time.time() - bundle_module.STALE_REPLICA_S - 60
+    stale, busy, fresh, half = (base / n for n in ("a" * 64, "b" * 64, "c" * 64, ".dddd.x1"))
+    for d in (stale, busy, fresh, half):
+        (d / "samples").mkdir(parents=True)
+    for d in (stale, busy, half):
+        os.utime(d, (old, old))
+    assert bundle_module.replica_root("b" * 64, b"", str(out)) == busy   # in use: touched
+    root = bundle_module.replica_root(key, data, str(out))               # unpacks: prunes
+    assert (root / "plan.json").exists() or any(root.rglob("plan.json"))
+    assert not stale.exists() and not half.exists()
+    assert busy.exists() and fresh.exists()
+    assert bundle_module.remove_replica(key) and not root.exists()
+
+
 def test_a_scene_folder_past_the_limit_asks_for_shared_dir(tmp_path, monkeypatch):
     out = tmp_path / "o"
     povlens.convert(SCENE, outdir=out, lens="dgauss.50mm", focus=4, method="mesh", samples=2,
