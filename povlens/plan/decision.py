@@ -70,7 +70,8 @@ from povlens.pupil.sampling import sobol_points
 
 __all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "shape_error_px", "vignetting_rmse", "shift_rmse",
            "probe_image_error", "film_radius_map_mm", "blur_range_px", "model_depths",
-           "samples_for_blur", "pupil_cut", "shift_tilt_cos", "catseye_px", "catseye_rmse", "pixel_blur_mm",
+           "samples_for_blur", "pupil_cut", "shift_tilt_cos", "catseye_px", "catseye_rmse",
+           "pixel_blur_mm",
            "SAMPLE_SPACING_PX", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "SAMPLE_RULE",
            "VIGNETTING_TOLERANCE", "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE",
            "CATSEYE_SAMPLES", "CATSEYE_RADII", "FIELD_MESH_SAMPLE_FACTOR"]
@@ -279,6 +280,24 @@ def _aperture_shape_check(aperture_shape: str | None, reasons: list, fb: list) -
         fb.append(False)
 
 
+def _focal_blur_checks(check, tol: float, dist: float, size_err: float, shape_err: float,
+                       blur_px: float, shift_tilt_cos: float, numbers: dict) -> list:
+    """focal_blur's geometric checks (distortion, blur size and shape, and with a lens
+    shift the width the tilted disc loses, ``blur_px`` x (1 - cos) / 2): passed flags."""
+    fb = [check("focal-blur: max distortion", dist, tol),
+          check("focal-blur: max blur size error / 2 (the rim moves by half the diameter "
+                "error)", size_err / 2, tol),
+          check("focal-blur: max blur shape error / 2 (the long axis reaches beyond the "
+                "disc by half on each side)", shape_err / 2, tol)]
+    if shift_tilt_cos < 1.0:
+        tilt_deg = math.degrees(math.acos(max(-1.0, min(1.0, shift_tilt_cos))))
+        numbers["shift_tilt_deg"] = tilt_deg
+        fb.append(check(f"focal-blur: lens shift: the disc, tilted {tilt_deg:.2g} deg, is "
+                        f"narrower along the shift by the blur x (1 - cos) / 2",
+                        blur_px * (1.0 - shift_tilt_cos) / 2, tol))
+    return fb
+
+
 def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
            pixel_pitch_mm: float, tolerance_px: float = 0.5, vignetting: bool = True,
            image_error: dict | None = None, catseye: dict | None = None,
@@ -363,17 +382,7 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     mesh_samples = min(MAX_SAMPLES, factor * samples)
     field_text = (f", times {factor} for field meshes (every pixel shares a sample's pupil "
                   f"point)" if factor > 1 else "")
-    fb = [check("focal-blur: max distortion", dist, tol),
-          check("focal-blur: max blur size error / 2 (the rim moves by half the diameter "
-                "error)", size_err / 2, tol),
-          check("focal-blur: max blur shape error / 2 (the long axis reaches beyond the "
-                "disc by half on each side)", shape_err / 2, tol)]
-    if shift_tilt_cos < 1.0:
-        tilt_deg = math.degrees(math.acos(max(-1.0, min(1.0, shift_tilt_cos))))
-        numbers["shift_tilt_deg"] = tilt_deg
-        fb.append(check(f"focal-blur: lens shift: the disc, tilted {tilt_deg:.2g} deg, is "
-                        f"narrower along the shift by the blur x (1 - cos) / 2",
-                        b_max * (1.0 - shift_tilt_cos) / 2, tol))
+    fb = _focal_blur_checks(check, tol, dist, size_err, shape_err, b_max, shift_tilt_cos, numbers)
     reasons.append("focal-blur: " + vig_text)
     _aperture_shape_check(aperture_shape, reasons, fb)
     floor_share = 0.0
