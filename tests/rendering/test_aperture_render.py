@@ -301,8 +301,7 @@ def _outline_corner_angles(img, n_angles=180):
 
 def test_rendered_far_highlight_has_six_corners_at_the_rotation(tmp_path):
     # the issue's test on a real render: 128 field samples resolve a hexagon's corners
-    # (a 9-blade outline, 6 % from round, needs ~1000 samples: tested on the traced spot
-    # above, rendered in benchmarks/aperture_bokeh.py)
+    # (9 blades: below, with per-pixel meshes)
     scene = tmp_path / "highlight.pov"
     scene.write_text(HIGHLIGHT)
     out = tmp_path / "six"
@@ -316,3 +315,44 @@ def test_rendered_far_highlight_has_six_corners_at_the_rotation(tmp_path):
     want = (100.0 + 60.0 * np.arange(6)) % 360
     err = np.abs((corners[:, None] - want[None, :] + 180) % 360 - 180).min(axis=1)
     assert err.max() < 8.0, corners
+
+
+def _outline_harmonics(img, n_angles=360, keep=12):
+    """The highlight outline's radius against angle (half-level contour walked along
+    rays from its centre, as above): the angles (deg) of the maxima of its Fourier
+    series cut after harmonic ``keep``, and the amplitudes of harmonics 0..keep."""
+    from scipy import ndimage
+    im = ndimage.gaussian_filter(img, 1.0)
+    h, w = im.shape
+    level = 0.5 * np.median(im[h // 2 - 4:h // 2 + 4, w // 2 - 4:w // 2 + 4])
+    labels, _ = ndimage.label(im > level)
+    cy, cx = ndimage.center_of_mass(labels == labels[h // 2, w // 2])
+    theta = np.radians(np.arange(n_angles) * 360.0 / n_angles)
+    r = np.arange(0.0, min(h, w) / 2, 0.25)
+    profile = ndimage.map_coordinates(im, [cy - np.outer(np.sin(theta), r),
+                                           cx + np.outer(np.cos(theta), r)], order=1)
+    edge = r[np.argmax(profile <= level, axis=1)]
+    f = np.fft.rfft(edge)
+    f[keep + 1:] = 0
+    smooth = np.fft.irfft(f, n_angles)
+    peak = (smooth > np.roll(smooth, 1)) & (smooth >= np.roll(smooth, -1))
+    return np.nonzero(peak)[0] * 360.0 / n_angles, np.abs(f[:keep + 1]) / n_angles
+
+
+def test_rendered_far_highlight_has_nine_corners_with_per_pixel_meshes(tmp_path):
+    # a 9-blade outline is 6 % from round: per-pixel meshes (a pupil point per pixel and
+    # sample) resolve it in 256 samples where field meshes would need ~1000
+    scene = tmp_path / "highlight.pov"
+    scene.write_text(HIGHLIGHT)
+    out = tmp_path / "nine"
+    assert main(["render", str(scene), "--lens", "dgauss.50mm", "--focus", "0.5",
+                 "--film-diagonal", "6", "--method", "mesh", "--samples", "256",
+                 "--ray-mesh", "pixel", "--width", "96", "--height", "96",
+                 "--aperture-blades", "9", "--blade-rotation", "7", "-q", "-o", str(out)]) == 0
+    img = read_image(out / "image.exr")[..., :3].mean(axis=2).astype(float)
+    corners, amplitude = _outline_harmonics(img)
+    assert np.argmax(amplitude[1:]) + 1 == 9                  # nine-fold above all else
+    assert len(corners) == 9
+    want = (97.0 + 40.0 * np.arange(9)) % 360                 # corners at 90 + rotation
+    err = np.abs((corners[:, None] - want[None, :] + 180) % 360 - 180).min(axis=1)
+    assert err.max() < 12.0, corners
