@@ -24,7 +24,8 @@ from povlens.errors import ParameterError, PovlensError
 from povlens.lens.aperture_shape import ApertureShape
 
 __all__ = ["shape_of_options", "shape_of_inputs", "inputs_of_shape", "read_mask", "describe",
-           "apply_aperture_shape", "FOCAL_BLUR_NOTE", "AUTO_NOTE", "PINHOLE_NOTE"]
+           "apply_aperture_shape", "band_iris_domain", "FOCAL_BLUR_NOTE", "AUTO_NOTE",
+           "PINHOLE_NOTE"]
 
 FOCAL_BLUR_NOTE = ("the aperture shape ({what}) is drawn only by the exact lens rays: "
                    "focal_blur renders a round aperture (use --method mesh)")
@@ -127,8 +128,8 @@ def describe(shape: ApertureShape) -> str:
 def apply_aperture_shape(opts, plan, lens, table) -> None:
     """What a shaped stop changes in a finished plan: ``focal-blur`` gets
     :data:`FOCAL_BLUR_NOTE`; a field-mesh plan of an iris samples the iris's pupil domain
-    (:func:`povlens.pupil.aperture_domain.iris_domain`; not with ``--dispersion``, whose
-    disc spans the wavelengths' pupils)."""
+    (:func:`povlens.pupil.aperture_domain.iris_domain`), with ``--dispersion`` the one
+    holding every wavelength's (:func:`band_iris_domain`)."""
     import dataclasses
     shape = lens.aperture_shape
     if shape is None:
@@ -136,10 +137,29 @@ def apply_aperture_shape(opts, plan, lens, table) -> None:
     if opts.method == "focal-blur":
         plan.add_note(FOCAL_BLUR_NOTE.format(what=describe(shape)))
     fm = plan.field_mesh
-    if (fm is None or shape.blades is None or shape.mask is not None or table is None
-            or getattr(plan.inputs, "dispersion", None)):
+    if fm is None or shape.blades is None or shape.mask is not None or table is None:
         return
-    from povlens.pupil.aperture_domain import iris_domain
-    radius, flip, _ = iris_domain(lens, plan.focus.film_distance_mm, table)
+    if getattr(plan.inputs, "dispersion", None):
+        radius, flip = band_iris_domain(lens, plan.focus.film_distance_mm, table)
+    else:
+        from povlens.pupil.aperture_domain import iris_domain
+        radius, flip, _ = iris_domain(lens, plan.focus.film_distance_mm, table)
     plan.field_mesh = dataclasses.replace(fm, iris_domain_radius_mm=float(radius),
                                           iris_flip=bool(flip))
+
+
+def band_iris_domain(lens, film_distance_mm: float, table) -> tuple[float, bool]:
+    """R_D (mm) and flip of the iris domain that holds the pass regions of the d line and
+    of the band's ends (``--dispersion``): the largest of their
+    :func:`~povlens.pupil.aperture_domain.iris_domain` radii, each searched over the
+    round-stop table grown to hold the band (:mod:`povlens.pupil.band_table`); the
+    pupils change monotonically with the index, so the ends bound the band."""
+    from povlens.lens.dispersion import BAND_NM, lens_at_wavelength
+    from povlens.pupil.aperture_domain import iris_domain
+    from povlens.pupil.band_table import band_dilation, band_table
+    ends = [lens_at_wavelength(lens, lam) for lam in BAND_NM]
+    grown = band_table(table, band_dilation(table, ends))
+    radius, flip, _ = iris_domain(lens, film_distance_mm, grown)
+    for end in ends:
+        radius = max(radius, iris_domain(end, film_distance_mm, grown)[0])
+    return radius, flip

@@ -24,6 +24,8 @@ from povlens.pupil.field_mask import field_transmission
 from povlens.rendering.samples import lens_for
 from povlens.util.images import read_image, write_png_srgb
 
+from conftest import ROOT
+
 BOKEH = """#version 3.7;
 global_settings { assumed_gamma 1.0 }
 camera { perspective location <0, 0, 0> look_at <0, 0, 1> right x up y }
@@ -158,6 +160,57 @@ def test_iris_domain_contains_every_passing_ray_and_is_tight():
     # on the axis the polygon domain passes >= 95 %, the disc only about the area ratio
     assert fractions[0] >= 0.95
     assert fractions[1] < 0.85
+
+
+def test_iris_domain_with_dispersion_holds_every_wavelength(tmp_path):
+    """--dispersion with an iris: the polygon domain holds the rays that pass at the
+    band's ends and between (not only the d line's), and on the axis still passes
+    more than the disc."""
+    from povlens.lens.dispersion import BAND_NM, lens_at_wavelength
+    from povlens.plan.aperture import band_iris_domain
+    lens0 = read_lens("tessar.50mm")
+    fd = focus(lens0, 2000.0).exact_film_distance_mm
+    table = build_pupil_table(lens0, fd, 21.6)
+    shape = ApertureShape(blades=6, rotation_deg=10)
+    lens = shaped_lens(lens0, shape)
+    rd_d, flip, _ = iris_domain(lens, fd, table)
+    rd, flip_band = band_iris_domain(lens, fd, table)
+    assert rd > rd_d and flip_band == flip
+    rb = 1.2 * bounding_disc_radius_mm(table)
+    rng = np.random.default_rng(2)
+    worst_d = worst = 0.0
+    for lam in (BAND_NM[0], 486.1, 656.3, BAND_NM[1]):
+        lam_lens = lens_at_wavelength(lens, lam)
+        for r in (0.0, 7.3, 14.1, 21.0):
+            phi = rng.uniform(0, 2 * math.pi)
+            f = np.array([r * math.cos(phi), r * math.sin(phi)])
+            P = concentric_disc_mm(rng.random((30000, 2)), rb)
+            o = np.zeros((len(P), 3))
+            o[:, :2] = f
+            ok = trace_from_film(lam_lens, fd, o,
+                                 np.c_[P - f, np.full(len(P), table.plane_z_mm)]).passed
+            gauge = np.hypot(P[ok, 0], P[ok, 1]) / iris_scale(
+                shape, np.arctan2(P[ok, 1], P[ok, 0]), flip)
+            worst, worst_d = max(worst, gauge.max() / rd), max(worst_d, gauge.max() / rd_d)
+    print(f"largest gauge of a passing ray / R_D: band {worst:.4f}, d line {worst_d:.4f}")
+    assert worst <= 1.0
+    # the planner uses it: the field meshes sample the polygon inside the band's disc
+    out = tmp_path / "p"
+    assert main(["convert", str(ROOT / "scenes" / "chart.pov"), "--lens", "tessar.50mm",
+                 "--method", "mesh", "--samples", "4", "--width", "64", "--height", "48",
+                 "--focus", "2", "--aperture-blades", "6", "--blade-rotation", "10",
+                 "--dispersion", "-o", str(out)]) == 0
+    fm = read_plan(out).field_mesh
+    assert read_plan(out).inputs.dispersion and fm.iris_domain_radius_mm is not None
+    u = concentric_disc_mm(rng.random((4000, 2)), 1.0)
+    polygon = np.array([iris_point_mm(shape, fm.iris_flip, fm.iris_domain_radius_mm,
+                                      fm.pupil_disc_radius_mm, p)[0] for p in u])
+    disc = u * fm.pupil_disc_radius_mm
+    axis = np.zeros((len(u), 3))
+    passes = [trace_from_film(lens, fd, axis, np.c_[q, np.full(len(q), table.plane_z_mm)]
+                              ).passed.mean() for q in (polygon, disc)]
+    print(f"on the axis: polygon domain passes {passes[0]:.3f}, the disc {passes[1]:.3f}")
+    assert passes[0] > 1.1 * passes[1]
 
 
 def test_iris_domain_weights_are_unbiased():
