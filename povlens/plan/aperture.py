@@ -129,7 +129,8 @@ def apply_aperture_shape(opts, plan, lens, table) -> None:
     """What a shaped stop changes in a finished plan: ``focal-blur`` gets
     :data:`FOCAL_BLUR_NOTE`; a field-mesh plan of an iris samples the iris's pupil domain
     (:func:`povlens.pupil.aperture_domain.iris_domain`), with ``--dispersion`` the one
-    holding every wavelength's (:func:`band_iris_domain`)."""
+    holding every wavelength's (:func:`band_iris_domain`); a per-pixel plan gets
+    ``plan.pixel_iris`` (the domain for :class:`povlens.pupil.iris_sampler.IrisPixelSampler`)."""
     import dataclasses
     shape = lens.aperture_shape
     if shape is None:
@@ -137,28 +138,41 @@ def apply_aperture_shape(opts, plan, lens, table) -> None:
     if opts.method == "focal-blur":
         plan.add_note(FOCAL_BLUR_NOTE.format(what=describe(shape)))
     fm = plan.field_mesh
-    if fm is None or shape.blades is None or shape.mask is not None or table is None:
+    if (shape.blades is None or shape.mask is not None or table is None
+            or plan.inputs.method != "mesh"):
         return
+    from povlens.pupil.aperture_domain import iris_domain
+    from povlens.pupil.band_table import band_table
+    from povlens.pupil.field import bounding_disc_radius_mm
+    fd = plan.focus.film_distance_mm
+    # per-pixel meshes with --dispersion draw from the band table (rendering.spectral)
+    factors = (plan.dispersion or {}).get("pupil_dilation") if fm is None else None
+    grown = table if factors is None else band_table(table, factors)
     if getattr(plan.inputs, "dispersion", None):
-        radius, flip = band_iris_domain(lens, plan.focus.film_distance_mm, table)
+        radius, flip = band_iris_domain(lens, fd, table, None if factors is None else grown)
     else:
-        from povlens.pupil.aperture_domain import iris_domain
-        radius, flip, _ = iris_domain(lens, plan.focus.film_distance_mm, table)
+        radius, flip, _ = iris_domain(lens, fd, table)
+    if fm is None:      # per-pixel meshes: the domain where it is tighter than the table
+        plan.pixel_iris = {"domain_radius_mm": float(radius), "flip": bool(flip),
+                           "disc_radius_mm": bounding_disc_radius_mm(grown)}
+        return
     plan.field_mesh = dataclasses.replace(fm, iris_domain_radius_mm=float(radius),
                                           iris_flip=bool(flip))
 
 
-def band_iris_domain(lens, film_distance_mm: float, table) -> tuple[float, bool]:
+def band_iris_domain(lens, film_distance_mm: float, table, grown=None) -> tuple[float, bool]:
     """R_D (mm) and flip of the iris domain that holds the pass regions of the d line and
     of the band's ends (``--dispersion``): the largest of their
     :func:`~povlens.pupil.aperture_domain.iris_domain` radii, each searched over the
-    round-stop table grown to hold the band (:mod:`povlens.pupil.band_table`); the
-    pupils change monotonically with the index, so the ends bound the band."""
+    round-stop table grown to hold the band (``grown``, default made here:
+    :mod:`povlens.pupil.band_table`); the pupils change monotonically with the index, so
+    the ends bound the band."""
     from povlens.lens.dispersion import BAND_NM, lens_at_wavelength
     from povlens.pupil.aperture_domain import iris_domain
     from povlens.pupil.band_table import band_dilation, band_table
     ends = [lens_at_wavelength(lens, lam) for lam in BAND_NM]
-    grown = band_table(table, band_dilation(table, ends))
+    if grown is None:
+        grown = band_table(table, band_dilation(table, ends))
     radius, flip, _ = iris_domain(lens, film_distance_mm, grown)
     for end in ends:
         radius = max(radius, iris_domain(end, film_distance_mm, grown)[0])

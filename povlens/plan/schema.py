@@ -427,7 +427,9 @@ class Plan:
     image by for the lens's vignetting (:mod:`povlens.rendering.vignetting`; None:
     nothing, and not written); ``dispersion`` the lens's chromatic aberration with
     ``--dispersion`` (:mod:`povlens.plan.dispersion_plan`; None: not asked or no Abbe
-    numbers, and not written)."""
+    numbers, and not written); ``pixel_iris`` the iris domain of per-pixel meshes
+    (:func:`povlens.plan.aperture.apply_aperture_shape`; None: no iris or other meshes,
+    and not written)."""
 
     inputs: Inputs
     lens: LensSummary
@@ -451,6 +453,9 @@ class Plan:
     #: --dispersion on a lens with Abbe numbers: its chromatic aberration
     #: (povlens.lens.dispersion.chromatic_aberration) and how the samples get colour.
     dispersion: dict | None = None
+    #: per-pixel meshes with an iris: {domain_radius_mm, flip, disc_radius_mm} of the
+    #: domain their sampler uses where it is tighter (povlens.pupil.iris_sampler).
+    pixel_iris: dict | None = None
 
     def add_note(self, text: str | None) -> None:
         """Add a note (:attr:`notes`) unless it is empty or already there."""
@@ -504,6 +509,8 @@ class Plan:
             d["field_mesh"] = self.field_mesh.to_dict()
         if self.dispersion is not None:
             d["dispersion"] = self.dispersion
+        if self.pixel_iris is not None:
+            d["pixel_iris"] = self.pixel_iris
         return _json_ready(d)
 
     @classmethod
@@ -540,7 +547,8 @@ class Plan:
             notes=notes,
             field_mesh=None if d.get("field_mesh") is None
             else FieldMeshSettings.from_dict(d["field_mesh"]),
-            vignetting_map=d.get("vignetting_map"), dispersion=d.get("dispersion"))
+            vignetting_map=d.get("vignetting_map"), dispersion=d.get("dispersion"),
+            pixel_iris=d.get("pixel_iris"))
 
 
 def plan_path(path: str | os.PathLike) -> Path:

@@ -57,7 +57,8 @@ from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pupil.sampling import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
 from povlens.rendering.composite import accumulate_samples, measurement_image
-from povlens.rendering.spectral import band_sampler, plan_channel_factors
+from povlens.rendering.pixel_sampler import pixel_sampler
+from povlens.rendering.spectral import plan_channel_factors
 from povlens.util.images import read_image, write_exr, write_png_srgb
 from povlens.pupil.rays import sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
@@ -194,8 +195,9 @@ def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
         points = np.array(points, dtype=np.float64)
     if not inp.jitter:
         points[..., :2] = 0.5  # pixel centres, as POV-Ray's perspective camera
-    if inp.dispersion:                  # sample k's wavelength; the band's pass regions
-        lens, table = sample_lens(plan, lens, k), band_sampler(plan, table)
+    table = pixel_sampler(plan, lens, table)    # the band with --dispersion; an iris's domain
+    if inp.dispersion:                           # sample k's wavelength
+        lens = sample_lens(plan, lens, k)
     r0, r1 = sample_rows(plan, k)
     rays = sample_rays(lens, plan.focus.film_distance_mm, film, table, placement, points,
                        rows=(r0, r1))  # rows this sample does not render: no rays, weight 0

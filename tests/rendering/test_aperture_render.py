@@ -409,3 +409,28 @@ def test_rendered_far_highlight_has_nine_corners_with_per_pixel_meshes(tmp_path)
     want = (97.0 + 40.0 * np.arange(9)) % 360                 # corners at 90 + rotation
     err = np.abs((corners[:, None] - want[None, :] + 180) % 360 - 180).min(axis=1)
     assert err.max() < 12.0, corners
+
+
+@pytest.mark.parametrize("extra", [[], ["--dispersion"]])
+def test_per_pixel_plans_of_an_iris_record_its_domain(tmp_path, extra):
+    from povlens.rendering.pixel_sampler import pixel_sampler
+    from povlens.rendering.samples import pupil_table_for
+    out = tmp_path / "px"
+    assert main(["convert", str(ROOT / "scenes" / "chart.pov"), "--lens", "tessar.50mm",
+                 "--method", "mesh", "--ray-mesh", "pixel", "--samples", "4", "--width", "32",
+                 "--height", "24", "--aperture-blades", "6", *extra, "-o", str(out)]) == 0
+    plan = read_plan(out)
+    assert plan.field_mesh is None and bool(plan.inputs.dispersion) == bool(extra)
+    iris = plan.pixel_iris
+    assert iris["domain_radius_mm"] > 0 and iris["disc_radius_mm"] > 0
+    assert json.loads((out / "plan.json").read_text())["pixel_iris"] == iris
+    lens = lens_for(plan)
+    sampler = pixel_sampler(plan, lens, pupil_table_for(out, plan, lens))
+    assert sampler.uses_domain(np.array([0.0]))[0]
+    if extra:                                          # the band table underneath
+        assert sampler.table.metadata["band_dilation_max"] >= 1.0
+    # no iris: no domain, and the plan.json has no such entry
+    assert main(["convert", str(ROOT / "scenes" / "chart.pov"), "--lens", "tessar.50mm",
+                 "--method", "mesh", "--ray-mesh", "pixel", "--samples", "4", "--width", "32",
+                 "--height", "24", "-o", str(tmp_path / "round")]) == 0
+    assert "pixel_iris" not in json.loads((tmp_path / "round" / "plan.json").read_text())
