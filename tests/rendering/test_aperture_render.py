@@ -330,12 +330,12 @@ sphere { <0, 0, 15>, 0.06 pigment { rgb 1 } finish { emission 12 diffuse 0 ambie
 """
 
 
-def _outline_corner_angles(img, n_angles=180):
-    """Angles (deg, counter-clockwise from image right, y up) of the maxima of the
-    highlight's outline radius: the half-level contour of the smoothed image, walked
-    along rays from the highlight's centre."""
+def _outline_radius(img, n_angles, sigma):
+    """The highlight's outline radius (px) at ``n_angles`` angles counter-clockwise from
+    image right (y up): the half-level contour of the image smoothed by ``sigma`` px,
+    walked along rays from the highlight's centre."""
     from scipy import ndimage
-    im = ndimage.gaussian_filter(img, 1.5)
+    im = ndimage.gaussian_filter(img, sigma)
     h, w = im.shape
     level = 0.5 * np.median(im[h // 2 - 4:h // 2 + 4, w // 2 - 4:w // 2 + 4])
     labels, _ = ndimage.label(im > level)
@@ -344,7 +344,13 @@ def _outline_corner_angles(img, n_angles=180):
     r = np.arange(0.0, min(h, w) / 2, 0.25)
     profile = ndimage.map_coordinates(im, [cy - np.outer(np.sin(theta), r),
                                            cx + np.outer(np.cos(theta), r)], order=1)
-    edge = r[np.argmax(profile <= level, axis=1)]
+    return r[np.argmax(profile <= level, axis=1)]
+
+
+def _outline_corner_angles(img, n_angles=180):
+    """Angles (deg) of the maxima of the highlight's outline radius (smoothed over
+    +-8 angles)."""
+    edge = _outline_radius(img, n_angles, 1.5)
     k = np.exp(-0.5 * (np.arange(-8, 9) / 2.5) ** 2)
     smooth = np.convolve(np.concatenate([edge[-8:], edge, edge[:8]]), k / k.sum(), "same")[8:-8]
     peak = ((smooth > np.roll(smooth, 1)) & (smooth >= np.roll(smooth, -1))
@@ -352,17 +358,24 @@ def _outline_corner_angles(img, n_angles=180):
     return np.nonzero(peak)[0] * 360.0 / n_angles
 
 
+def _far_highlight(tmp_path, blades: int, rotation_deg: float, samples: int,
+                   ray_mesh: str = "field") -> np.ndarray:
+    """The grey (96, 96) mesh render of HIGHLIGHT far out of focus through an iris."""
+    scene = tmp_path / "highlight.pov"
+    scene.write_text(HIGHLIGHT)
+    out = tmp_path / f"iris{blades}"
+    assert main(["render", str(scene), "--lens", "dgauss.50mm", "--focus", "0.5",
+                 "--film-diagonal", "6", "--method", "mesh", "--samples", str(samples),
+                 "--ray-mesh", ray_mesh, "--width", "96", "--height", "96",
+                 "--aperture-blades", str(blades), "--blade-rotation", str(rotation_deg),
+                 "-q", "-o", str(out)]) == 0
+    return read_image(out / "image.exr")[..., :3].mean(axis=2).astype(float)
+
+
 def test_rendered_far_highlight_has_six_corners_at_the_rotation(tmp_path):
     # the issue's test on a real render: 128 field samples resolve a hexagon's corners
     # (9 blades: below, with per-pixel meshes)
-    scene = tmp_path / "highlight.pov"
-    scene.write_text(HIGHLIGHT)
-    out = tmp_path / "six"
-    assert main(["render", str(scene), "--lens", "dgauss.50mm", "--focus", "0.5",
-                 "--film-diagonal", "6", "--method", "mesh", "--samples", "128",
-                 "--width", "96", "--height", "96", "--aperture-blades", "6",
-                 "--blade-rotation", "10", "-q", "-o", str(out)]) == 0
-    img = read_image(out / "image.exr")[..., :3].mean(axis=2).astype(float)
+    img = _far_highlight(tmp_path, blades=6, rotation_deg=10, samples=128)
     corners = _outline_corner_angles(img)
     assert len(corners) == 6
     want = (100.0 + 60.0 * np.arange(6)) % 360
@@ -371,21 +384,9 @@ def test_rendered_far_highlight_has_six_corners_at_the_rotation(tmp_path):
 
 
 def _outline_harmonics(img, n_angles=360, keep=12):
-    """The highlight outline's radius against angle (half-level contour walked along
-    rays from its centre, as above): the angles (deg) of the maxima of its Fourier
-    series cut after harmonic ``keep``, and the amplitudes of harmonics 0..keep."""
-    from scipy import ndimage
-    im = ndimage.gaussian_filter(img, 1.0)
-    h, w = im.shape
-    level = 0.5 * np.median(im[h // 2 - 4:h // 2 + 4, w // 2 - 4:w // 2 + 4])
-    labels, _ = ndimage.label(im > level)
-    cy, cx = ndimage.center_of_mass(labels == labels[h // 2, w // 2])
-    theta = np.radians(np.arange(n_angles) * 360.0 / n_angles)
-    r = np.arange(0.0, min(h, w) / 2, 0.25)
-    profile = ndimage.map_coordinates(im, [cy - np.outer(np.sin(theta), r),
-                                           cx + np.outer(np.cos(theta), r)], order=1)
-    edge = r[np.argmax(profile <= level, axis=1)]
-    f = np.fft.rfft(edge)
+    """The angles (deg) of the maxima of the outline radius's Fourier series cut after
+    harmonic ``keep``, and the amplitudes of harmonics 0..keep."""
+    f = np.fft.rfft(_outline_radius(img, n_angles, 1.0))
     f[keep + 1:] = 0
     smooth = np.fft.irfft(f, n_angles)
     peak = (smooth > np.roll(smooth, 1)) & (smooth >= np.roll(smooth, -1))
@@ -395,14 +396,7 @@ def _outline_harmonics(img, n_angles=360, keep=12):
 def test_rendered_far_highlight_has_nine_corners_with_per_pixel_meshes(tmp_path):
     # a 9-blade outline is 6 % from round: per-pixel meshes (a pupil point per pixel and
     # sample) resolve it in 256 samples where field meshes would need ~1000
-    scene = tmp_path / "highlight.pov"
-    scene.write_text(HIGHLIGHT)
-    out = tmp_path / "nine"
-    assert main(["render", str(scene), "--lens", "dgauss.50mm", "--focus", "0.5",
-                 "--film-diagonal", "6", "--method", "mesh", "--samples", "256",
-                 "--ray-mesh", "pixel", "--width", "96", "--height", "96",
-                 "--aperture-blades", "9", "--blade-rotation", "7", "-q", "-o", str(out)]) == 0
-    img = read_image(out / "image.exr")[..., :3].mean(axis=2).astype(float)
+    img = _far_highlight(tmp_path, blades=9, rotation_deg=7, samples=256, ray_mesh="pixel")
     corners, amplitude = _outline_harmonics(img)
     assert np.argmax(amplitude[1:]) + 1 == 9                  # nine-fold above all else
     assert len(corners) == 9
