@@ -127,11 +127,12 @@ def describe(shape: ApertureShape) -> str:
 
 def apply_aperture_shape(opts, plan, lens, table) -> None:
     """What a shaped stop changes in a finished plan: ``focal-blur`` gets
-    :data:`FOCAL_BLUR_NOTE`; a field-mesh plan of an iris samples the iris's pupil domain
-    (:func:`povlens.pupil.aperture_domain.iris_domain`), with ``--dispersion`` the one
-    holding every wavelength's (:func:`band_iris_domain`); a per-pixel plan gets
-    ``plan.pixel_iris`` (the domain for :class:`povlens.pupil.iris_sampler.IrisPixelSampler`)."""
-    import dataclasses
+    :data:`FOCAL_BLUR_NOTE`; a per-pixel mesh plan of an iris gets ``plan.pixel_iris``
+    (the iris's pupil domain, :func:`povlens.pupil.aperture_domain.iris_domain`, with
+    ``--dispersion`` the one holding every wavelength's, :func:`band_iris_domain`; for
+    :class:`povlens.pupil.iris_sampler.IrisPixelSampler`).  Field meshes draw from the
+    round stop's ellipses, which hold the iris's regions
+    (:mod:`povlens.pupil.field_domain`)."""
     shape = lens.aperture_shape
     if shape is None:
         return
@@ -139,25 +140,22 @@ def apply_aperture_shape(opts, plan, lens, table) -> None:
         plan.add_note(FOCAL_BLUR_NOTE.format(what=describe(shape)))
     fm = plan.field_mesh
     if (shape.blades is None or shape.mask is not None or table is None
-            or plan.inputs.method != "mesh"):
-        return
+            or plan.inputs.method != "mesh" or fm is not None):
+        return      # field meshes: the ellipses of the round stop hold the iris's regions
     from povlens.pupil.aperture_domain import iris_domain
     from povlens.pupil.band_table import band_table
     from povlens.pupil.field import bounding_disc_radius_mm
     fd = plan.focus.film_distance_mm
     # per-pixel meshes with --dispersion draw from the band table (rendering.spectral)
-    factors = (plan.dispersion or {}).get("pupil_dilation") if fm is None else None
+    factors = (plan.dispersion or {}).get("pupil_dilation")
     grown = table if factors is None else band_table(table, factors)
     if getattr(plan.inputs, "dispersion", None):
         radius, flip = band_iris_domain(lens, fd, table, None if factors is None else grown)
     else:
         radius, flip, _ = iris_domain(lens, fd, table)
-    if fm is None:      # per-pixel meshes: the domain where it is tighter than the table
-        plan.pixel_iris = {"domain_radius_mm": float(radius), "flip": bool(flip),
-                           "disc_radius_mm": bounding_disc_radius_mm(grown)}
-        return
-    plan.field_mesh = dataclasses.replace(fm, iris_domain_radius_mm=float(radius),
-                                          iris_flip=bool(flip))
+    # per-pixel meshes: the domain where it is tighter than the table
+    plan.pixel_iris = {"domain_radius_mm": float(radius), "flip": bool(flip),
+                       "disc_radius_mm": bounding_disc_radius_mm(grown)}
 
 
 def band_iris_domain(lens, film_distance_mm: float, table, grown=None) -> tuple[float, bool]:

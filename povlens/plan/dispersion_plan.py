@@ -76,19 +76,21 @@ def apply_dispersion(opts, plan, lens, table) -> None:
         plan.add_note(f"--dispersion: only the mesh method renders colour fringes; this "
                       f"{opts.method} render shows none ({colour})")
         return
-    if plan.field_mesh is None:
-        # per-pixel meshes sample the d-line table grown to hold the band's pass regions
-        factors = band_dilation(table, [lens_at_wavelength(lens, lam) for lam in BAND_NM])
-        info.update(rendered=True, pupil_dilation=[float(f) for f in factors])
-        plan.inputs = dataclasses.replace(plan.inputs, dispersion=True)
-        return
-    fm = plan.field_mesh
-    field_radius = max(film.max_field_radius_mm, float(table.max_film_radius_mm))
-    radius = disc_radius_mm(lens, focus.film_distance_mm, field_radius, table.plane_z_mm,
-                            fm.pupil_disc_radius_mm)
-    info.update(rendered=True, pupil_disc_radius_d_line_mm=fm.pupil_disc_radius_mm)
-    plan.field_mesh = dataclasses.replace(fm, pupil_disc_radius_mm=radius)
+    # the samples draw from the d-line table grown to hold the band's pass regions: per-pixel
+    # meshes from its polygons, field meshes from the ellipses that hold them
+    factors = band_dilation(table, [lens_at_wavelength(lens, lam) for lam in BAND_NM])
+    info.update(rendered=True, pupil_dilation=[float(f) for f in factors])
     plan.inputs = dataclasses.replace(plan.inputs, dispersion=True)
+    fm = plan.field_mesh
+    if fm is not None:
+        from povlens.pupil.band_table import band_table
+        from povlens.pupil.field import bounding_disc_radius_mm
+        from povlens.pupil.field_domain import field_domain
+        grown = band_table(table, factors)
+        info.update(pupil_disc_radius_d_line_mm=fm.pupil_disc_radius_mm)
+        plan.field_mesh = dataclasses.replace(
+            fm, pupil_disc_radius_mm=bounding_disc_radius_mm(grown),
+            domain=field_domain(grown).to_dict())
 
 
 def colour_decision(opts, lens, plan, decision):

@@ -26,11 +26,12 @@ import numpy as np
 
 from povlens.plan.schema import FieldMeshSettings
 from povlens.pov.field_emulation import ray_error_px
-from povlens.pov.field_mesh import build_field_mesh, lens_ray_field, uv_model
-from povlens.pupil.field import bounding_disc_radius_mm, concentric_disc_mm
+from povlens.pov.field_mesh import build_field_mesh, uv_model
+from povlens.pupil.field import PupilMap, bounding_disc_radius_mm, concentric_disc_mm, trace_field
+from povlens.pupil.field_domain import field_domain
 
-__all__ = ["choose_field_mesh", "certification_pupil_points", "pixel_subset", "TARGET_PX",
-           "LIMIT_PX", "EPS_CHOICES"]
+__all__ = ["choose_field_mesh", "certification_pupil_points", "pixel_subset", "interleave_for",
+           "TARGET_PX", "LIMIT_PX", "EPS_CHOICES", "PASS_FACE_BUDGET", "MAX_INTERLEAVE"]
 
 #: The ray error the grid is sized for, and the most a certified plan may keep.
 TARGET_PX = 0.035
@@ -46,8 +47,9 @@ CHECK_PIXELS = 10000
 MAX_GRID_WIDTH = 400
 
 
-def certification_pupil_points(radius_mm: float) -> np.ndarray:
-    """(17, 2) pupil points (mm): the centre, 8 at half ``radius_mm``, 8 at 0.99 of it."""
+def certification_pupil_points(radius_mm: float = 1.0) -> np.ndarray:
+    """(17, 2) canonical points (of the disc of ``radius_mm``): the centre, 8 at half the
+    radius, 8 at 0.99 of it."""
     a = np.arange(8) * math.pi / 4 + math.pi / 8
     ring = np.stack([np.cos(a), np.sin(a)], 1)
     return np.vstack([[0.0, 0.0], 0.5 * radius_mm * ring, 0.99 * radius_mm * ring])
@@ -75,18 +77,45 @@ def _grid_for_width(gx: int, width: int, height: int) -> tuple[int, int]:
 
 
 def _max_error(ctx, grid, eps, points, rows, cols, exact_cache) -> tuple[float, float]:
-    lens, fd, film, plane_z, placement, pa, model = ctx
+    lens, fd, film, plane_z, placement, pa, model, domain = ctx
     px, py = model.pixel_positions()
     worst, worst_origin = 0.0, 0.0
-    for P in points:
-        field = lens_ray_field(lens, fd, film, plane_z, P)
-        key = (float(P[0]), float(P[1]))
+    for q in points:
+        pupil = PupilMap(domain, (float(q[0]), float(q[1])))
+
+        def field(x, y, pupil=pupil):
+            return trace_field(lens, fd, film, plane_z, pupil, x, y)
+        key = (float(q[0]), float(q[1]))
         if key not in exact_cache:      # the exact rays do not depend on the grid
             exact_cache[key] = field(px[cols], py[rows])
         mesh = build_field_mesh(field, placement, model, grid, eps, pa)
         e = ray_error_px(mesh, model, field, placement, pa, rows, cols, exact=exact_cache[key])
         worst, worst_origin = max(worst, e["direction_px"]), max(worst_origin, e["origin_mm"])
     return worst, worst_origin
+
+
+#: Faces a pass may hold in all (m^2 tiles of the grid's): POV-Ray 3.7 finds a pixel's
+#: face by testing, in order, the faces that share its cell of a fixed 10 x 10 UV grid,
+#: so a pass costs more with more faces (docs/decisions/exact-lens-distribution3.md).
+PASS_FACE_BUDGET = 4000
+#: The largest interleave tried.
+MAX_INTERLEAVE = 4
+
+
+def interleave_for(grid: tuple[int, int], width: int, height: int) -> int:
+    """m: the largest m <= :data:`MAX_INTERLEAVE` whose m^2 tiles of ``grid`` (2 gx gy
+    faces each) stay within :data:`PASS_FACE_BUDGET` faces, and whose tiles keep 8
+    pixels across.  ``POVLENS_INTERLEAVE`` overrides it (measurements)."""
+    import os
+    forced = os.environ.get("POVLENS_INTERLEAVE")
+    if forced:
+        return max(1, int(forced))
+    faces = 2 * int(grid[0]) * int(grid[1])
+    m = 1
+    while (m < MAX_INTERLEAVE and (m + 1) ** 2 * faces <= PASS_FACE_BUDGET
+           and min(width, height) >= 8 * (m + 1)):
+        m += 1
+    return m
 
 
 def choose_field_mesh(lens, film_distance_mm: float, film, table, placement, efl_mm: float,
@@ -115,17 +144,18 @@ def choose_field_mesh(lens, film_distance_mm: float, film, table, placement, efl
                       f"(only 3.7.0.x's), so lens samples are rendered with a face per pixel")
     model = uv_model(W, H, CHECK_JITTER, povray_version)
     radius = bounding_disc_radius_mm(table)
+    domain = field_domain(table)
     pa = film.pixel_pitch_mm / abs(efl_mm)
-    ctx = (lens, film_distance_mm, film, table.plane_z_mm, placement, pa, model)
+    ctx = (lens, film_distance_mm, film, table.plane_z_mm, placement, pa, model, domain)
     rows, cols = pixel_subset(W, H)
-    trial = [concentric_disc_mm(np.array(u), radius) for u in TRIAL_POINTS]
+    trial = [concentric_disc_mm(np.array(u), 1.0) for u in TRIAL_POINTS]
     g0 = _grid_for_width(int(math.ceil(24 * math.sqrt(W / 640.0))), W, H)
     cache: dict = {}
     trials = {eps: _max_error(ctx, g0, eps, trial, rows, cols, cache)[0] for eps in EPS_CHOICES}
     eps = min(trials, key=trials.get)
     e0 = trials[eps]
     gx = g0[0] if e0 <= TARGET_PX else int(math.ceil(g0[0] * math.sqrt(e0 / TARGET_PX)))
-    points = certification_pupil_points(radius)
+    points = certification_pupil_points()
     for _ in range(4):
         grid = _grid_for_width(gx, W, H)
         err, origin = _max_error(ctx, grid, eps, points, rows, cols, cache)
@@ -139,4 +169,5 @@ def choose_field_mesh(lens, film_distance_mm: float, film, table, placement, efl
     return FieldMeshSettings(grid=grid, eps=float(eps), pupil_disc_radius_mm=float(radius),
                              max_ray_error_px=float(err), max_origin_error_mm=float(origin),
                              pupil_points=len(points), pixels_checked=int(len(rows)),
-                             limit_px=LIMIT_PX), ""
+                             limit_px=LIMIT_PX, domain=domain.to_dict(),
+                             interleave=interleave_for(grid, W, H)), ""

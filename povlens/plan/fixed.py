@@ -445,8 +445,11 @@ def _field_mesh(opts: ConvertOptions, plan: Plan, st: PlanStart, placement, tabl
         plan.inputs = dataclasses.replace(plan.inputs, ray_mesh="pixel")
         plan.add_note(why_not)
         return
-    plan.povray = PovraySettings(plan.povray.version, film.width_px + 1, film.height_px + 1,
-                                 1, 1)
+    from povlens.pov.field_mesh import pass_size
+    if plan.sample_rows is not None or opts.adaptive:    # row bands: one tile
+        plan.field_mesh = dataclasses.replace(plan.field_mesh, interleave=1)
+    wr, hr = pass_size(film.width_px, film.height_px, plan.field_mesh.interleave)
+    plan.povray = PovraySettings(plan.povray.version, wr, hr, 1, 1)
 
 
 def _antialias_note(opts: ConvertOptions, st: PlanStart) -> str | None:

@@ -29,7 +29,7 @@ from povlens.pov.sdl_text import pov_string, pov_vector, read_template
 from povlens.util.files import write_text
 
 __all__ = ["write_folder", "write_if_changed", "focal_blur_text", "blur_settings",
-           "stale_samples", "invalidate_outputs", "SAMPLE_INDEPENDENT_INPUTS"]
+           "stale_samples", "invalidate_outputs", "SAMPLE_INDEPENDENT_INPUTS", "ILLUMINATION_FILE"]
 
 #: Plan inputs that do not change what lens sample k renders: the sample count
 #: (scrambled-Sobol point k is the same for any count), how samples are batched,
@@ -101,10 +101,14 @@ def _makefile(plan: Plan) -> str:
         povlens=f"{shlex.quote(sys.executable)} -m povlens", rules=rules)
 
 
-def _iris_domain(plan: Plan):
-    """The field samples' iris pupil domain (it moves every sample's pupil point)."""
+#: The relative illumination profile a field-mesh composite used (beside exposure.txt).
+ILLUMINATION_FILE = "illumination.json"
+
+
+def _sample_layout(plan: Plan):
+    """The field samples' pupil domain and interleave (they move every sample's rays)."""
     fm = plan.field_mesh
-    return None if fm is None else (fm.iris_domain_radius_mm, fm.iris_flip)
+    return None if fm is None else (fm.domain, fm.interleave)
 
 
 def stale_samples(old: Plan, new: Plan) -> list[int] | None:
@@ -113,7 +117,7 @@ def stale_samples(old: Plan, new: Plan) -> list[int] | None:
     that the new plan no longer has."""
     oi = {k: v for k, v in old.inputs.to_dict().items() if k not in SAMPLE_INDEPENDENT_INPUTS}
     ni = {k: v for k, v in new.inputs.to_dict().items() if k not in SAMPLE_INDEPENDENT_INPUTS}
-    if oi != ni or _iris_domain(old) != _iris_domain(new):
+    if oi != ni or _sample_layout(old) != _sample_layout(new):
         return None
     n_old, n_new = int(old.inputs.samples), int(new.inputs.samples)
     return [k for k in range(n_old)
@@ -130,7 +134,7 @@ def invalidate_outputs(outdir: Path, stale: list[int] | None = None) -> None:
                 "image.png", "view-*.exr"]
     if stale is None:
         patterns += ["samples/*.exr", "samples/*.blocked", "samples/*.inc", "samples/*.mask.npy",
-                     "exposure.txt"]
+                     "exposure.txt", ILLUMINATION_FILE]
     for pattern in patterns:
         for f in outdir.glob(pattern):
             f.unlink()
@@ -151,7 +155,8 @@ def write_folder(outdir: Path, plan: Plan) -> None:
             old = read_plan(outdir)
         except PovlensError:
             old = None
-    if old is not None and old.inputs.to_dict() != plan.inputs.to_dict():
+    if old is not None and (old.inputs.to_dict() != plan.inputs.to_dict()
+                            or _sample_layout(old) != _sample_layout(plan)):
         invalidate_outputs(outdir, stale_samples(old, plan))
     cam = plan.povray_camera
     write_if_changed(outdir / "pinhole.pov", pinhole_wrapper(

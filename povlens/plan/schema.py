@@ -377,11 +377,14 @@ class DepthProbeRecord:
 @dataclasses.dataclass(frozen=True)
 class FieldMeshSettings:
     """The field ray meshes of a mesh plan (:mod:`povlens.plan.field_grid`): ``grid``
-    faces across and down, the direction encoding ``eps``, the pupil disc's radius
-    on the table's sampling plane, and the certification: the largest ray error
-    measured (``max_ray_error_px``, angle x focal length / pixel pitch;
-    ``max_origin_error_mm``) over ``pupil_points`` pupil points and ``pixels_checked``
-    pixels each."""
+    faces across and down, the direction encoding ``eps``, the pupil domain of every
+    film point (``domain``: :class:`povlens.pupil.field_domain.FieldDomain` as a dict;
+    ``pupil_disc_radius_mm`` the disc about the axis that holds every film point's
+    region, for the record), ``interleave`` m (a pass renders m x m tiles, each pixel
+    of a tile with the tile's lens sample: :func:`povlens.pov.field_mesh.pass_models`),
+    and the certification: the largest ray error measured (``max_ray_error_px``, angle x
+    focal length / pixel pitch; ``max_origin_error_mm``) over ``pupil_points`` pupil
+    points and ``pixels_checked`` pixels each."""
 
     grid: tuple[int, int]
     eps: float
@@ -391,22 +394,16 @@ class FieldMeshSettings:
     pupil_points: int
     pixels_checked: int
     limit_px: float
-    #: With an iris: the pupil points' domain is the stop's polygon, of gauge radius
-    #: ``iris_domain_radius_mm``, turned 180 deg when ``iris_flip``
-    #: (:mod:`povlens.pupil.aperture_domain`); None (not written): the disc.
-    iris_domain_radius_mm: float | None = None
-    iris_flip: bool | None = None
+    domain: dict | None = None
+    interleave: int = 1
 
     def to_dict(self) -> dict:
-        d = dataclasses.asdict(self)
-        for k in ("iris_domain_radius_mm", "iris_flip"):
-            if d[k] is None:
-                del d[k]
-        return _json_ready(d)
+        return _json_ready(dataclasses.asdict(self))
 
     @classmethod
     def from_dict(cls, d: dict) -> "FieldMeshSettings":
-        return _fields_of(cls, d, grid=(int(d["grid"][0]), int(d["grid"][1])))
+        return _fields_of(cls, d, grid=(int(d["grid"][0]), int(d["grid"][1])),
+                          interleave=int(d.get("interleave", 1)))
 
 
 @dataclasses.dataclass

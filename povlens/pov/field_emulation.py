@@ -18,14 +18,15 @@ __all__ = ["emulate", "ray_error_px"]
 
 
 def emulate(mesh: FieldMesh, model: UVModel, rows=None, cols=None):
-    """World origins (n, 3) and unit directions (n, 3) POV-Ray traces for output pixels
-    (``rows``, ``cols``: equal-length index arrays; default every pixel, row-major)."""
+    """World origins (n, 3) and unit directions (n, 3) POV-Ray traces for the tile's
+    pixels (``rows``, ``cols``: equal-length index arrays into the tile's (Hc, Wc)
+    pixels; default every pixel, row-major)."""
     pu, pv = model.pixel_uv()
     if rows is None:
         pu, pv = pu.ravel(), pv.ravel()
     else:
         pu, pv = pu[rows, cols], pv[rows, cols]
-    face, B = locate_in_grid(mesh.grid, float(mesh.uv[0, 0]), pu, pv)
+    face, B = locate_in_grid(mesh.grid, mesh.rect, pu, pv)
     tri = mesh.faces[face]
     q = mesh.vertex.astype(np.float32).astype(float)
     n = mesh.normal.astype(np.float32).astype(float)
@@ -50,7 +51,7 @@ def ray_error_px(mesh: FieldMesh, model: UVModel, ray_field, placement, pixel_an
         ``origin_mm``: largest distance of POV-Ray's origin from the exact ray's line
         (mm); ``pixels``: how many passing pixels were compared.
     """
-    H, W = model.height, model.width
+    W, H = model.size
     if rows is None:
         rows, cols = (a.ravel() for a in np.mgrid[0:H, 0:W])
     px, py = model.pixel_positions()

@@ -44,7 +44,8 @@ from povlens.lens.prescription import LensPrescription
 from povlens.pov.process import pixel_range_args
 from povlens.pupil.field import trace_field
 
-__all__ = ["UVModel", "uv_model", "FieldMesh", "lens_ray_field", "build_field_mesh", "mesh2_text",
+__all__ = ["UVModel", "uv_model", "pass_models", "pass_size", "deinterleave", "FieldMesh",
+           "PassMesh", "combine_meshes", "lens_ray_field", "build_field_mesh", "mesh2_text",
            "placement_text", "FIT_SUBDIVISION", "MESH_NAME", "TRANSFORM_NAME"]
 
 #: The fit's sample grid is this many times finer than the mesh.
@@ -56,12 +57,23 @@ TRANSFORM_NAME = "PovlensPlace"
 
 @dataclasses.dataclass(frozen=True)
 class UVModel:
-    """How POV-Ray samples a distribution-3 mesh camera for a W x H image.
+    """How POV-Ray samples one tile of a distribution-3 mesh camera for a W x H image.
+
+    A pass of an interleaved render (:func:`pass_models`) renders m x m tiles side by
+    side, tile (ox, oy) holding the image's columns ox, ox + m, ... and rows oy, oy + m,
+    ...: its own mesh over the whole film, so neighbouring pixels take different lens
+    samples (interleaved sampling, Keller and Heidrich 2001).  m = 1 is one tile, the
+    image itself.
 
     width, height : the output image (pixels).
-    render_width, render_height : what POV-Ray renders.
+    render_width, render_height : what POV-Ray renders (W', H').
     drop_top_rows, drop_right_columns : what is cut from the render.
-    jitter_px : (jx, jy) the sample's sub-pixel offset.
+    jitter_px : (jx, jy) the tile's sub-pixel offset.
+    stride : m.
+    offset : (ox, oy) the tile's first image column and row.
+    tile_origin : (I0, J0) the rendered pixel (after the cut) of the tile's first pixel.
+    tile_size : (Wc, Hc) the tile's image pixels.
+    tile_extent : (Wt, Ht) the rendered pixels each tile is given (Wc <= Wt).
     """
 
     width: int
@@ -71,42 +83,123 @@ class UVModel:
     drop_top_rows: int
     drop_right_columns: int
     jitter_px: tuple[float, float]
+    stride: int = 1
+    offset: tuple[int, int] = (0, 0)
+    tile_origin: tuple[int, int] = (0, 0)
+    tile_size: tuple[int, int] | None = None
+    tile_extent: tuple[int, int] | None = None
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(Wc, Hc)."""
+        return self.tile_size if self.tile_size is not None else (self.width, self.height)
+
+    @property
+    def extent(self) -> tuple[int, int]:
+        return self.tile_extent if self.tile_extent is not None else (self.width, self.height)
+
+    def uv_rect(self) -> tuple[float, float, float, float]:
+        """(u0, u1, v0, v1): the tile's UV rectangle, its edges half a pixel outside its
+        sample positions (u0 >= -0.25 / W', inside POV-Ray's 10 x 10 bins)."""
+        (I0, J0), (Wt, Ht) = self.tile_origin, self.extent
+        Wr, Hr, d = self.render_width, self.render_height, self.drop_top_rows
+        u0 = max((I0 - 0.5) / Wr, -0.25 / Wr)
+        return (u0, (I0 + Wt - 0.5) / Wr, 1.0 - (J0 + Ht - 0.5 + d) / Hr,
+                1.0 - (J0 - 0.5 + d) / Hr)
 
     def uv_to_image(self, u, v):
         """Image position (x, y) (pixels) a UV point stands for."""
         jx, jy = self.jitter_px
-        return (np.asarray(u) * self.render_width + jx,
-                (1.0 - np.asarray(v)) * self.render_height - self.drop_top_rows + jy)
+        (I0, J0), (ox, oy), m = self.tile_origin, self.offset, self.stride
+        X = np.asarray(u) * self.render_width - I0
+        Y = (1.0 - np.asarray(v)) * self.render_height - self.drop_top_rows - J0
+        return m * X + ox + jx, m * Y + oy + jy
 
     def pixel_uv(self):
-        """(H, W) u and v POV-Ray samples for each output pixel."""
-        i = np.arange(self.width, dtype=float)[None, :]
-        j = np.arange(self.height, dtype=float)[:, None] + self.drop_top_rows
-        return (np.broadcast_to(i / self.render_width, (self.height, self.width)),
-                np.broadcast_to(1.0 - j / self.render_height, (self.height, self.width)))
+        """(Hc, Wc) u and v POV-Ray samples for each of the tile's pixels."""
+        (Wc, Hc), (I0, J0) = self.size, self.tile_origin
+        i = np.arange(Wc, dtype=float)[None, :] + I0
+        j = np.arange(Hc, dtype=float)[:, None] + J0 + self.drop_top_rows
+        return (np.broadcast_to(i / self.render_width, (Hc, Wc)),
+                np.broadcast_to(1.0 - j / self.render_height, (Hc, Wc)))
+
+    def columns(self) -> np.ndarray:
+        """(Wc,) the image columns of the tile's pixels."""
+        return self.offset[0] + self.stride * np.arange(self.size[0])
+
+    def rows(self) -> np.ndarray:
+        """(Hc,) the image rows of the tile's pixels."""
+        return self.offset[1] + self.stride * np.arange(self.size[1])
 
     def pixel_positions(self):
-        """(W,), (H,) image x and y where output pixel columns and rows are sampled."""
+        """(Wc,), (Hc,) image x and y where the tile's pixel columns and rows are sampled."""
         jx, jy = self.jitter_px
-        return np.arange(self.width) + jx, np.arange(self.height) + jy
+        return self.columns() + jx, self.rows() + jy
 
     def povray_switches(self, rows: tuple[int, int] | None = None) -> list[str]:
         """+W/+H and the column and row ranges (film rows ``rows`` [r0, r1), default
-        all) that render exactly the output pixels."""
-        r0, r1 = (0, self.height) if rows is None else rows
+        all; one tile only) that render exactly the output pixels."""
+        r0, r1 = (0, self.render_height - self.drop_top_rows) if rows is None else rows
+        if rows is not None and self.stride != 1:
+            raise ValueError("row ranges of an interleaved render are not contiguous")
         return ([f"+W{self.render_width}", f"+H{self.render_height}"]
-                + pixel_range_args(0, self.width, self.render_width, "col")
+                + pixel_range_args(0, self.render_width - self.drop_right_columns,
+                                   self.render_width, "col")
                 + pixel_range_args(r0 + self.drop_top_rows, r1 + self.drop_top_rows,
                                    self.render_height, "row"))
 
 
-def uv_model(width: int, height: int, jitter_px=(0.5, 0.5), version: str = "3.7.0.10") -> UVModel:
-    """The measured sampling of POV-Ray ``version`` (3.7.0.x only)."""
+def _check_version(version: str) -> None:
     if not str(version).startswith("3.7.0"):
         raise PovlensError(f"the field ray meshes are measured on POV-Ray 3.7.0.x only, "
                            f"not {version}", "convert with --ray-mesh pixel")
+
+
+def uv_model(width: int, height: int, jitter_px=(0.5, 0.5), version: str = "3.7.0.10") -> UVModel:
+    """The measured sampling of POV-Ray ``version`` (3.7.0.x only) for one tile, the image."""
+    _check_version(version)
     return UVModel(int(width), int(height), int(width) + 1, int(height) + 1, 1, 1,
                    (float(jitter_px[0]), float(jitter_px[1])))
+
+
+def pass_size(width: int, height: int, stride: int) -> tuple[int, int]:
+    """(W', H'): what POV-Ray renders for an interleaved pass of m = ``stride``: m x m
+    tiles of ceil(W / m) x ceil(H / m) pixels, plus FS#261's column and row."""
+    m = int(stride)
+    return m * -(-int(width) // m) + 1, m * -(-int(height) // m) + 1
+
+
+def pass_models(width: int, height: int, stride: int, jitters, version: str = "3.7.0.10"
+                ) -> list[UVModel]:
+    """The m x m tiles of one interleaved pass (m = ``stride``), tile c = ox + m oy with
+    offset (ox, oy) and sub-pixel offset ``jitters[c]``; m = 1 is :func:`uv_model`."""
+    _check_version(version)
+    m, W, H = int(stride), int(width), int(height)
+    if m == 1:
+        return [uv_model(W, H, jitters[0], version)]
+    Wt, Ht = -(-W // m), -(-H // m)
+    Wr, Hr = pass_size(W, H, m)
+    out = []
+    for oy in range(m):
+        for ox in range(m):
+            j = jitters[ox + m * oy]
+            out.append(UVModel(W, H, Wr, Hr, 1, 1, (float(j[0]), float(j[1])), m, (ox, oy),
+                               (ox * Wt, oy * Ht), (len(range(ox, W, m)), len(range(oy, H, m))),
+                               (Wt, Ht)))
+    return out
+
+
+def deinterleave(image: np.ndarray, models: list[UVModel]) -> np.ndarray:
+    """The (H, W, C) image of a pass POV-Ray rendered as tiles (``image``: the render
+    after its cut row and column)."""
+    if len(models) == 1:
+        return image
+    W, H = models[0].width, models[0].height
+    out = np.empty((H, W) + image.shape[2:], dtype=image.dtype)
+    for t in models:
+        (I0, J0), (Wc, Hc), (ox, oy), m = t.tile_origin, t.size, t.offset, t.stride
+        out[oy::m, ox::m] = image[J0:J0 + Hc, I0:I0 + Wc]
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,6 +230,7 @@ class FieldMesh:
     margin_mm2: np.ndarray
     fit_error_px: float
     eps: float
+    rect: tuple[float, float, float, float] = (0.0, 1.0, 0.0, 1.0)
 
     def node_margins(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Node columns' image x (gx+1,), rows' image y (gy+1,) increasing, and the
@@ -150,11 +244,11 @@ class FieldMesh:
 
 
 def uv_grid(gx: int, gy: int, model: UVModel) -> tuple[np.ndarray, np.ndarray]:
-    """(V, 2) vertex UVs on [u0, 1] x [0, 1] and (F, 3) faces.  u0 = -0.25 / W' keeps
-    column 0's samples (u = 0) strictly inside; UVs above 1 would overrun POV-Ray's
-    10 x 10 bins.  Cell (r, c) holds faces r gx + c (a, b, d) and F/2 + r gx + c (a, d, c)."""
-    u = np.linspace(-0.25 / model.render_width, 1.0, gx + 1)
-    v = np.linspace(0.0, 1.0, gy + 1)
+    """(V, 2) vertex UVs on the tile's :meth:`UVModel.uv_rect` and (F, 3) faces.
+    Cell (r, c) holds faces r gx + c (a, b, d) and F/2 + r gx + c (a, d, c)."""
+    u0, u1, v0, v1 = model.uv_rect()
+    u = np.linspace(u0, u1, gx + 1)
+    v = np.linspace(v0, v1, gy + 1)
     U, V = np.meshgrid(u, v)
     idx = np.arange((gx + 1) * (gy + 1)).reshape(gy + 1, gx + 1)
     a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
@@ -163,13 +257,14 @@ def uv_grid(gx: int, gy: int, model: UVModel) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([U.ravel(), V.ravel()], 1), faces
 
 
-def locate_in_grid(grid: tuple[int, int], u0: float, pu, pv) -> tuple[np.ndarray, np.ndarray]:
-    """Face (n,) and barycentrics (n, 3) of UV points in a :func:`uv_grid` mesh, as
-    POV-Ray picks them (the first face in order containing the point)."""
+def locate_in_grid(grid: tuple[int, int], rect, pu, pv) -> tuple[np.ndarray, np.ndarray]:
+    """Face (n,) and barycentrics (n, 3) of UV points in a :func:`uv_grid` mesh over
+    ``rect`` (u0, u1, v0, v1), as POV-Ray picks them (the first face containing the point)."""
     gx, gy = grid
+    u0, u1, v0, v1 = rect
     pu, pv = np.asarray(pu, float).ravel(), np.asarray(pv, float).ravel()
-    fu = (pu - u0) / (1.0 - u0) * gx
-    fv = pv * gy
+    fu = (pu - u0) / (u1 - u0) * gx
+    fv = (pv - v0) / (v1 - v0) * gy
     c = np.clip(np.floor(fu).astype(int), 0, gx - 1)
     r = np.clip(np.floor(fv).astype(int), 0, gy - 1)
     su, sv = fu - c, fv - r
@@ -200,7 +295,7 @@ def lens_ray_field(lens: LensPrescription, film_distance_mm: float, film: Film,
 
 
 def build_field_mesh(ray_field, placement, model: UVModel, grid: tuple[int, int], eps: float,
-                     pixel_angle_rad: float) -> FieldMesh:
+                     pixel_angle_rad: float, origin_world=None) -> FieldMesh:
     """Trace and encode the ray mesh of one lens sample.
 
     ray_field : callable (x (n,), y (n,)) image positions (pixels) -> an object with
@@ -211,6 +306,9 @@ def build_field_mesh(ray_field, placement, model: UVModel, grid: tuple[int, int]
     grid : (gx, gy); eps : the direction encoding's scale (module docstring).
     pixel_angle_rad : the angle of one pixel at the image centre (pitch / focal
         length), the unit of ``fit_error_px``.
+    origin_world : (3,) the world point the vertices are stored relative to (the
+        matrix's translation; default the middle of the ray origins): the tiles of one
+        pass share it (:func:`combine_meshes`).
     """
     gx, gy = int(grid[0]), int(grid[1])
     uv, faces = uv_grid(gx, gy, model)
@@ -221,16 +319,39 @@ def build_field_mesh(ray_field, placement, model: UVModel, grid: tuple[int, int]
     direction = _fill_missing(rays.direction, rays.exists, gx, gy)
     origin = _fill_missing(rays.origin_mm, rays.exists, gx, gy)
     p = placement.points_to_world(origin)
-    T = 0.5 * (p.min(0) + p.max(0))
+    T = 0.5 * (p.min(0) + p.max(0)) if origin_world is None else np.asarray(origin_world, float)
     vertex = ((p - T) @ R.T) / S
     normal = direction * S
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    normal, err = _fit_normals(ray_field, model, (gx, gy), float(uv[0, 0]), faces, normal, S,
-                               pixel_angle_rad)
+    normal, err = _fit_normals(ray_field, model, (gx, gy), faces, normal, S, pixel_angle_rad)
     matrix = np.vstack([S[:, None] * R, T])
     vertex = _separate_filled(vertex, faces, rays.exists)
     return FieldMesh((gx, gy), uv, np.stack([x, y], 1), vertex, normal, matrix, faces,
-                     rays.exists, rays.margin_mm2, err, float(eps))
+                     rays.exists, rays.margin_mm2, err, float(eps), model.uv_rect())
+
+
+@dataclasses.dataclass(frozen=True)
+class PassMesh:
+    """The tiles of one pass as the one ``mesh2`` POV-Ray reads: vertex, normal and UV
+    vectors and faces of every tile in turn, and their shared ``matrix`` (4, 3)."""
+
+    vertex: np.ndarray
+    normal: np.ndarray
+    uv: np.ndarray
+    faces: np.ndarray
+    matrix: np.ndarray
+
+
+def combine_meshes(meshes: list[FieldMesh]) -> PassMesh:
+    """One :class:`PassMesh` of tiles built with the same ``origin_world`` and encoding."""
+    m0 = meshes[0]
+    if any(not np.array_equal(m.matrix, m0.matrix) for m in meshes[1:]):
+        raise ValueError("the tiles of one pass must share their matrix")
+    offsets = np.cumsum([0] + [len(m.vertex) for m in meshes[:-1]])
+    return PassMesh(np.concatenate([m.vertex for m in meshes]),
+                    np.concatenate([m.normal for m in meshes]),
+                    np.concatenate([m.uv for m in meshes]),
+                    np.concatenate([m.faces + o for m, o in zip(meshes, offsets)]), m0.matrix)
 
 
 def _degenerate(vertex: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -265,7 +386,7 @@ def _separate_filled(vertex: np.ndarray, faces: np.ndarray, exists: np.ndarray) 
                        "--ray-mesh pixel")
 
 
-def _fit_normals(ray_field, model, grid, u0, faces, normal0, S, pixel_angle_rad):
+def _fit_normals(ray_field, model, grid, faces, normal0, S, pixel_angle_rad):
     """Least-squares vertex normals n minimising sum_s |sum_k B_k(s) n_k - t_s|^2 over a
     grid FIT_SUBDIVISION times finer than the mesh (t_s = normalize(d_s S), what a
     vertex at s would store), only where the lens passes light; and the largest
@@ -275,14 +396,16 @@ def _fit_normals(ray_field, model, grid, u0, faces, normal0, S, pixel_angle_rad)
     import scipy.sparse.linalg as spl
     gx, gy = grid
     k = FIT_SUBDIVISION
-    U, V = np.meshgrid(np.linspace(u0, 1.0, gx * k + 1), np.linspace(0.0, 1.0, gy * k + 1))
+    rect = model.uv_rect()
+    U, V = np.meshgrid(np.linspace(rect[0], rect[1], gx * k + 1),
+                       np.linspace(rect[2], rect[3], gy * k + 1))
     su, sv = U.ravel(), V.ravel()
     x, y = model.uv_to_image(su, sv)
     rays = ray_field(x, y)
     use = rays.passed
     if not use.any():
         return normal0, 0.0
-    face, B = locate_in_grid(grid, u0, su[use], sv[use])
+    face, B = locate_in_grid(grid, rect, su[use], sv[use])
     t = rays.direction[use] * S
     t /= np.linalg.norm(t, axis=1, keepdims=True)
     n_s, n_v = int(use.sum()), len(normal0)
@@ -304,7 +427,7 @@ def _rows(a: np.ndarray, fmt: str) -> str:
     return ",\n".join([row] * len(a)) % tuple(a.ravel().tolist())
 
 
-def mesh2_text(mesh: FieldMesh, name: str = MESH_NAME) -> str:
+def mesh2_text(mesh: FieldMesh | PassMesh, name: str = MESH_NAME) -> str:
     """``#declare NAME = mesh2 {...}``: vertex, normal and UV vectors (their indices
     default to the face indices)."""
     return (f"#declare {name} = mesh2 {{\n"
@@ -314,7 +437,7 @@ def mesh2_text(mesh: FieldMesh, name: str = MESH_NAME) -> str:
             f"face_indices {{ {len(mesh.faces)},\n{_rows(mesh.faces, '%d')}\n}}\n}}\n")
 
 
-def placement_text(mesh: FieldMesh, name: str = TRANSFORM_NAME) -> str:
+def placement_text(mesh: FieldMesh | PassMesh, name: str = TRANSFORM_NAME) -> str:
     """``#declare NAME = transform { matrix <...> }`` placing the mesh in the world
     (in double precision)."""
     values = ", ".join("%.17g" % v for v in mesh.matrix.ravel())

@@ -25,11 +25,15 @@ def accumulate_samples(
     drop_top_rows: int = 0,
     drop_right_columns: int = 0,
     channel_weights: Sequence[np.ndarray] | None = None,
+    transform=None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The sums of a composite, one sample in memory at a time.
 
     Parameters are those of :func:`composite`; ``weight_arrays`` may be any iterable
-    (a generator computing each sample's weights when it is reached).
+    (a generator computing each sample's weights when it is reached).  ``transform``:
+    a function applied to each image after its rows and columns are dropped (an
+    interleaved field pass puts its pixels in place:
+    :func:`povlens.rendering.field_samples.deinterleave_sample`).
     ``channel_weights`` (with ``weight_arrays``): K arrays (3,) multiplying sample
     k's weights per colour channel, f_kc (spectral samples,
     :mod:`povlens.rendering.spectral`); the sums are then per channel, and the
@@ -61,6 +65,8 @@ def accumulate_samples(
             raise PovlensError(
                 f"image {p} has only {img.shape[1]} columns; cannot drop {right} column(s)")
         img = img[drop:, :img.shape[1] - right]
+        if transform is not None:
+            img = transform(img)
         if shape is None:
             shape = img.shape
             total = np.zeros(shape, dtype=np.float64)
@@ -102,11 +108,16 @@ def accumulate_samples(
 
 
 def measurement_image(total: np.ndarray, wsum: np.ndarray, samples_per_row: np.ndarray,
-                      exposure: float | None) -> np.ndarray:
+                      exposure: float | None, illumination: np.ndarray | None = None
+                      ) -> np.ndarray:
     """(H, W, 3) float64 image of a mesh composite's sums (:func:`accumulate_samples`).
 
     ``sum w I / sum w`` per pixel; with vignetting (``exposure`` not None) times the
-    measurement's ``exposure * sum w / N_p`` (``samples_per_row`` (H,) N_p).  With
+    measurement's ``exposure * sum w / N_p`` (``samples_per_row`` (H,) N_p), or, given
+    ``illumination`` (H, W), times that: the lens's exact relative illumination, a
+    ratio estimator (the mean radiance of the passing samples times the known share of
+    light that passes) whose vignetting has no steps where samples pass or not over
+    whole regions, as field lens samples do.  With
     channel weights (``wsum`` (H, W, 4), ``--dispersion``) each channel is the
     colour-weighted mean ``sum f_c w I_c / sum f_c w`` and the measurement factor the
     plain ``sum w``: a grey scene stays exactly grey at any sample count, the exposure
@@ -121,7 +132,9 @@ def measurement_image(total: np.ndarray, wsum: np.ndarray, samples_per_row: np.n
         w = wsum
         nz = w > 0
         image[nz] = total[nz][:, :3] / w[nz][:, None]
-    if exposure is not None:
+    if illumination is not None:
+        image *= np.asarray(illumination, dtype=np.float64)[..., None]
+    elif exposure is not None:
         image *= (w * exposure / samples_per_row[:, None])[..., None]
     return image
 

@@ -1,19 +1,23 @@
 """Lens samples of a field-mesh plan: the ray mesh POV-Ray renders, and the weights.
 
-Sample k of a plan with ``field_mesh`` (:mod:`povlens.plan.field_grid`) is one pupil
-point and one sub-pixel offset for every pixel (:mod:`povlens.pupil.field`).  Its
-outputs, beside the image POV-Ray renders:
+Sample k of a plan with ``field_mesh`` (:mod:`povlens.plan.field_grid`) is one pass:
+m x m tiles (m = ``field_mesh.interleave``), tile c holding every m-th pixel from
+(ox, oy) with its own canonical lens sample (a point of the unit disc, mapped per film
+point onto that point's pupil ellipse, and a sub-pixel offset: :mod:`povlens.pupil.field`).
+Its outputs, beside the image POV-Ray renders (the tiles side by side;
+:func:`povlens.pov.field_mesh.deinterleave` puts each pixel in its place):
 
-* ``samples/sample_KKKK.inc``: the mesh ``PovlensRays`` and the transform
+* ``samples/sample_KKKK.inc``: the mesh ``PovlensRays`` (every tile's) and the transform
   ``PovlensPlace`` (:mod:`povlens.pov.field_mesh`), deleted after the render;
 * ``samples/sample_KKKK.mask.npy``: which pixels the lens passes
   (:func:`povlens.pupil.field_mask.pass_mask`), bits packed by row (``np.packbits``).
-  The weights follow from it, the pupil point and the offset
+  The weights follow from it and the tiles' samples
   (:func:`povlens.pupil.field.field_weight`), so no weight image is written.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 from pathlib import Path
@@ -22,18 +26,17 @@ import numpy as np
 
 from povlens.errors import PovlensError
 from povlens.plan.schema import Plan
-from povlens.pov.field_mesh import (build_field_mesh, lens_ray_field, mesh2_text,
-                                    placement_text, uv_model)
-from povlens.pupil.field import concentric_disc_mm, field_sample_points, field_weight
+from povlens.pov.field_mesh import (build_field_mesh, combine_meshes, deinterleave, mesh2_text,
+                                    pass_models, placement_text)
+from povlens.pupil.field import (PupilMap, concentric_disc_mm, field_sample_points, field_weight,
+                                 tile_points, trace_field)
+from povlens.pupil.field_domain import FieldDomain, disc_domain
 from povlens.pupil.field_mask import field_transmission, pass_mask
-from povlens.pupil.aperture_domain import iris_point_mm
-from povlens.lens.aperture_shape import ApertureShape
 from povlens.pupil.rays import ScenePlacement
-from povlens.util.files import write_bytes, write_text
+from povlens.util.files import write_bytes
 
-__all__ = ["placement_of", "field_sample", "sample_domain_radius_mm", "sample_lens", "mask_path",
-           "write_field_sample",
-           "field_sample_weight"]
+__all__ = ["placement_of", "FieldTile", "field_tiles", "field_domain_of", "sample_lens",
+           "mask_path", "write_field_sample", "field_sample_weight", "deinterleave_sample"]
 
 
 def placement_of(plan: Plan) -> ScenePlacement:
@@ -48,35 +51,47 @@ def _points(n: int, seed: int, jitter: bool) -> np.ndarray:
     return field_sample_points(n, seed, jitter)
 
 
-def field_sample(plan: Plan, k: int) -> tuple[np.ndarray, tuple[float, float]]:
-    """Sample k's pupil point (2,) mm on the table's plane and its sub-pixel offset.
-    The same for every sample count (Sobol' prefixes), so a plan that adds samples
-    keeps the first ones."""
-    inp = plan.inputs
-    n = 1 << max(0, int(inp.samples) - 1).bit_length()
-    pts = _points(n, int(inp.seed), bool(inp.jitter))[k]
-    pupil, _ = _pupil_and_domain_radius(plan, pts[2:])
-    return pupil, (float(pts[0]), float(pts[1]))
-
-
-def _pupil_and_domain_radius(plan: Plan, u: np.ndarray) -> tuple[np.ndarray, float]:
-    """The pupil point (2,) mm of u (2,) and the domain's radius there (mm; the density is
-    1 / (pi r^2)): the disc, or with an iris its polygon (povlens.pupil.aperture_domain)."""
+def field_domain_of(plan: Plan) -> FieldDomain:
+    """The plan's pupil domain (the bounding disc for plans made before domains)."""
     fm = plan.field_mesh
-    if fm.iris_domain_radius_mm is None:
-        return concentric_disc_mm(u, fm.pupil_disc_radius_mm), fm.pupil_disc_radius_mm
-    inp = plan.inputs
-    shape = ApertureShape(blades=inp.aperture_blades, curvature=inp.blade_curvature or 0.0,
-                          rotation_deg=inp.blade_rotation_deg or 0.0)
-    return iris_point_mm(shape, bool(fm.iris_flip), fm.iris_domain_radius_mm,
-                         fm.pupil_disc_radius_mm, concentric_disc_mm(u, 1.0))
+    if fm.domain is None:
+        return disc_domain(fm.pupil_disc_radius_mm, plan.film.max_field_radius_mm)
+    return FieldDomain.from_dict(fm.domain)
 
 
-def sample_domain_radius_mm(plan: Plan, k: int) -> float:
-    """The pupil domain's radius (mm) at sample k's pupil point: the weight's pi r^2."""
-    inp = plan.inputs
+@dataclasses.dataclass(frozen=True)
+class FieldTile:
+    """One tile of a field pass: its UV model (:class:`povlens.pov.field_mesh.UVModel`:
+    which pixels, where POV-Ray samples them, the sub-pixel offset) and its pupil map."""
+
+    model: object
+    pupil: PupilMap
+
+
+def field_tiles(plan: Plan, k: int) -> list[FieldTile]:
+    """The tiles of pass k.  The same for every sample count (Sobol' prefixes), so a
+    plan that adds samples keeps the first ones."""
+    inp, fm, film = plan.inputs, plan.field_mesh, plan.film
     n = 1 << max(0, int(inp.samples) - 1).bit_length()
-    return _pupil_and_domain_radius(plan, _points(n, int(inp.seed), bool(inp.jitter))[k][2:])[1]
+    pts = tile_points(_points(n, int(inp.seed), bool(inp.jitter))[k], fm.interleave,
+                      int(inp.seed))
+    if not inp.jitter:
+        pts[:, :2] = 0.5
+    models = pass_models(film.width_px, film.height_px, fm.interleave, pts[:, :2],
+                         plan.povray.version)
+    domain = field_domain_of(plan)
+    return [FieldTile(m, PupilMap(domain, tuple(concentric_disc_mm(p[2:], 1.0))))
+            for m, p in zip(models, pts)]
+
+
+def deinterleave_sample(plan: Plan, image: np.ndarray) -> np.ndarray:
+    """A pass's image (after the cut row and column) with every pixel in its place."""
+    fm, film = plan.field_mesh, plan.film
+    if fm is None or fm.interleave == 1:
+        return image
+    models = pass_models(film.width_px, film.height_px, fm.interleave,
+                         np.full((fm.interleave ** 2, 2), 0.5), plan.povray.version)
+    return deinterleave(image, models)
 
 
 def sample_lens(plan: Plan, lens, k: int):
@@ -110,40 +125,53 @@ def _pack(mask: np.ndarray) -> bytes:
 
 
 def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path) -> bool:
-    """Trace sample k, write its pass mask and, if any pixel of its rows passes, its
+    """Trace pass k, write its pass mask and, if any pixel of its rows passes, its
     mesh to ``inc``.  Returns False when every ray of its rows is blocked."""
     film, fm = plan.film, plan.field_mesh
     fd = plan.focus.film_distance_mm
-    pupil, jitter = field_sample(plan, k)
     lens = sample_lens(plan, lens, k)
-    model = uv_model(film.width_px, film.height_px, jitter, plan.povray.version)
     placement = placement_of(plan)
     pixel_angle = film.pixel_pitch_mm / abs(plan.lens.efl_mm)
-    field = lens_ray_field(lens, fd, film, table.plane_z_mm, pupil)
-    mesh = build_field_mesh(field, placement, model, fm.grid, fm.eps, pixel_angle)
-    xs, ys, margins = mesh.node_margins()
-    px, py = model.pixel_positions()
-    passed, _ = pass_mask(xs, ys, margins, px, py, field)
+    origin = None           # the tiles share the first one's (the matrix's translation)
+    passed = np.zeros((film.height_px, film.width_px), bool)
+    masked = lens.aperture_shape is not None and lens.aperture_shape.mask is not None
+    transmission = np.zeros(passed.shape, np.float32) if masked else None
+    meshes = []
+    for tile in field_tiles(plan, k):
+        model = tile.model
+
+        def field(x, y, pupil=tile.pupil):
+            return trace_field(lens, fd, film, table.plane_z_mm, pupil, x, y)
+        mesh = build_field_mesh(field, placement, model, fm.grid, fm.eps, pixel_angle, origin)
+        origin = mesh.matrix[3]
+        xs, ys, margins = mesh.node_margins()
+        px, py = model.pixel_positions()
+        ok, _ = pass_mask(xs, ys, margins, px, py, field)
+        rows, cols = model.rows(), model.columns()
+        passed[np.ix_(rows, cols)] = ok
+        if masked:      # grey mask stop: each passing pixel's transmission
+            transmission[np.ix_(rows, cols)] = field_transmission(
+                lens, fd, film, table.plane_z_mm, tile.pupil, px, py, ok)
+        meshes.append(mesh)
     r0, r1 = plan.rows_of_sample(k)
     passed[:r0] = False
     passed[r1:] = False
-    if lens.aperture_shape is not None and lens.aperture_shape.mask is not None:
-        # grey mask stop: each passing pixel's transmission, before the mask (done marker)
-        t = field_transmission(lens, fd, film, table.plane_z_mm, pupil, px, py, passed)
-        write_bytes(transmission_path(outdir, k), _npy(t))
+    if masked:          # before the mask (its done marker)
+        write_bytes(transmission_path(outdir, k), _npy(transmission))
     write_bytes(mask_path(outdir, k), _pack(passed))
     if not passed.any():
         return False
+    one = combine_meshes(meshes)
     part = inc.with_name(inc.name + ".part")
     with open(part, "w") as f:
-        f.write(mesh2_text(mesh))
-        f.write(placement_text(mesh))
+        f.write(mesh2_text(one))
+        f.write(placement_text(one))
     os.replace(part, inc)
     return True
 
 
 def field_sample_weight(plan: Plan, table, outdir: Path, k: int) -> np.ndarray:
-    """(H, W) float32 weights of rendered sample k (its mask, pupil point and offset)."""
+    """(H, W) float32 weights of rendered sample k (its mask and its tiles' samples)."""
     film = plan.film
     path = mask_path(outdir, k)
     try:
@@ -156,9 +184,12 @@ def field_sample_weight(plan: Plan, table, outdir: Path, k: int) -> np.ndarray:
         raise PovlensError(f"{path} holds a {passed.shape} mask, not the film's "
                            f"{(film.height_px, film.width_px)}",
                            f"delete it and sample_{k:04d}.exr, then render again")
-    pupil, jitter = field_sample(plan, k)
-    w = field_weight(film, table.plane_z_mm, pupil, sample_domain_radius_mm(plan, k),
-                     jitter, passed)
+    w = np.zeros(passed.shape, np.float32)
+    for tile in field_tiles(plan, k):
+        rows, cols = tile.model.rows(), tile.model.columns()
+        w[np.ix_(rows, cols)] = field_weight(film, table.plane_z_mm, tile.pupil,
+                                             tile.model.jitter_px, passed[np.ix_(rows, cols)],
+                                             cols, rows)
     if plan.inputs.aperture_image:                        # grey mask: w times transmission
         tpath = transmission_path(outdir, k)
         try:

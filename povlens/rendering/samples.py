@@ -58,12 +58,14 @@ from povlens.pupil.sampling import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
 from povlens.rendering.composite import accumulate_samples, measurement_image
 from povlens.rendering.pixel_sampler import pixel_sampler
+from povlens.rendering.vignetting import mesh_illumination_map
 from povlens.rendering.spectral import plan_channel_factors
 from povlens.util.images import read_image, write_exr, write_png_srgb
 from povlens.pupil.rays import sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
-from povlens.rendering.field_samples import (field_sample_weight, mask_path, placement_of,
-                                             sample_lens, write_field_sample)
+from povlens.rendering.field_samples import (deinterleave_sample, field_sample_weight,
+                                             mask_path, placement_of, sample_lens,
+                                             write_field_sample)
 from povlens.rendering.groups import group_sums, grouped
 from povlens.util.files import write_text
 from povlens.util.signals import interrupts_deferred
@@ -457,6 +459,25 @@ def render_view(outdir: str | os.PathLike, view: str) -> Path:
     return out
 
 
+def _layout(plan: Plan):
+    """What puts a sample image's pixels in place (interleaved field passes), or None."""
+    fm = plan.field_mesh
+    if fm is None or fm.interleave == 1:
+        return None
+    return lambda img: deinterleave_sample(plan, img)
+
+
+def illumination_map(outdir: Path, plan: Plan, table) -> np.ndarray | None:
+    """(H, W) the lens's exact relative illumination that a field-mesh composite is
+    scaled by (:func:`povlens.rendering.composite.measurement_image`), or None where
+    the composite keeps the measurement's own estimate: per-pixel meshes (their
+    samples follow each pixel's region, so their weights have no steps) and grey
+    aperture masks (whose transmission the map does not hold)."""
+    if plan.field_mesh is None or plan.inputs.aperture_image:
+        return None
+    return mesh_illumination_map(outdir, plan, table)
+
+
 def _finish_image(outdir: Path, image: np.ndarray) -> None:
     write_exr(outdir / "image.exr", image.astype(np.float32))
     write_png_srgb(outdir / "image.png", np.clip(image, 0.0, None))
@@ -505,8 +526,10 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
         total, wsum = sums if sums is not None else accumulate_samples(
             paths, (sample_weight(outdir, k, plan, table) for k in rendered),
             drop_top_rows=drop, drop_right_columns=plan.povray.drop_right_columns,
-            channel_weights=None if spectral is None else spectral[rendered])
-        image = measurement_image(total, wsum, n_p, exposure if vignetting else None)
+            channel_weights=None if spectral is None else spectral[rendered],
+            transform=_layout(plan))
+        ri = illumination_map(outdir, plan, table) if vignetting else None
+        image = measurement_image(total, wsum, n_p, exposure if vignetting else None, ri)
     if write:
         _finish_image(outdir, image.astype(np.float32))
     return image
@@ -528,7 +551,7 @@ def sample_sums(outdir: str | os.PathLike, k: int, plan: Plan, table):
         [_sample_paths(outdir, k)[0]], [sample_weight(outdir, k, plan, table)],
         drop_top_rows=plan.povray.drop_top_rows,
         drop_right_columns=plan.povray.drop_right_columns,
-        channel_weights=None if spectral is None else spectral[[k]])
+        channel_weights=None if spectral is None else spectral[[k]], transform=_layout(plan))
 
 
 def _mark_batches_done(outdir: Path, plan: Plan) -> None:

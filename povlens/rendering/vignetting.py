@@ -28,6 +28,7 @@ from typing import Callable
 
 import numpy as np
 
+from povlens.plan.render_folder import ILLUMINATION_FILE
 from povlens.plan.schema import Plan, write_plan
 from povlens.pupil.illumination import (IlluminationProfile, illumination_profile,
                                         profile_from_record, profile_record,
@@ -35,7 +36,7 @@ from povlens.pupil.illumination import (IlluminationProfile, illumination_profil
 
 __all__ = ["wants_vignetting_map", "vignetting_profile", "vignetting_record",
            "apply_vignetting_map", "start_vignetting_map", "PendingVignettingMap",
-           "RECORD_METHOD"]
+           "mesh_illumination_map", "RECORD_METHOD", "ILLUMINATION_FILE"]
 
 #: ``vignetting_map.method`` of plan.json.
 RECORD_METHOD = ("relative illumination E(pixel)/E(centre) from the exit-pupil table "
@@ -134,6 +135,28 @@ def apply_vignetting_map(outdir, plan: Plan, image: np.ndarray, table) -> np.nda
         return image
     profile, ri = _map_of(plan, table)
     return _apply(outdir, plan, image, table, profile, ri)
+
+
+def mesh_illumination_map(outdir, plan: Plan, table) -> np.ndarray:
+    """(H, W) the relative illumination a field-mesh composite is scaled by
+    (:func:`povlens.rendering.composite.measurement_image`).  Its profile over film
+    radius is the plan's (auto's decision measured it) or computed once and kept in
+    OUTDIR/:data:`ILLUMINATION_FILE` (plan.json is left alone: make compares its time
+    with the samples'), so a later composite gives the same image bit for bit."""
+    import json
+    from povlens.util.files import write_text
+    path = Path(outdir) / ILLUMINATION_FILE
+    try:
+        profile = profile_from_record(json.loads(path.read_text()), table)
+    except (OSError, ValueError):
+        profile = None
+    if profile is None:
+        profile = vignetting_profile(plan, table)
+        write_text(path, json.dumps(profile_record(profile, table)))
+    film = plan.film
+    return relative_illumination_map(profile, film.width_mm, film.height_mm, film.width_px,
+                                     film.height_px, pixel_average=bool(plan.inputs.jitter),
+                                     shift_mm=film.shift_mm)
 
 
 class PendingVignettingMap:
