@@ -446,8 +446,6 @@ def _field_mesh(opts: ConvertOptions, plan: Plan, st: PlanStart, placement, tabl
         plan.add_note(why_not)
         return
     from povlens.pov.field_mesh import pass_size
-    if plan.sample_rows is not None or opts.adaptive:    # row bands: one tile
-        plan.field_mesh = dataclasses.replace(plan.field_mesh, interleave=1)
     wr, hr = pass_size(film.width_px, film.height_px, plan.field_mesh.interleave)
     plan.povray = PovraySettings(plan.povray.version, wr, hr, 1, 1)
 

@@ -44,7 +44,8 @@ from povlens.lens.prescription import LensPrescription
 from povlens.pov.process import pixel_range_args
 from povlens.pupil.field import trace_field
 
-__all__ = ["UVModel", "uv_model", "pass_models", "pass_size", "deinterleave", "FieldMesh",
+__all__ = ["UVModel", "uv_model", "pass_models", "pass_size", "pass_rows", "deinterleave",
+           "FieldMesh",
            "PassMesh", "combine_meshes", "lens_ray_field", "build_field_mesh", "mesh2_text",
            "placement_text", "FIT_SUBDIVISION", "MESH_NAME", "TRANSFORM_NAME"]
 
@@ -59,11 +60,12 @@ TRANSFORM_NAME = "PovlensPlace"
 class UVModel:
     """How POV-Ray samples one tile of a distribution-3 mesh camera for a W x H image.
 
-    A pass of an interleaved render (:func:`pass_models`) renders m x m tiles side by
-    side, tile (ox, oy) holding the image's columns ox, ox + m, ... and rows oy, oy + m,
+    A pass of an interleaved render (:func:`pass_models`) renders m x m tiles in one row,
+    tile c = ox + m oy holding the image's columns ox, ox + m, ... and rows oy, oy + m,
     ...: its own mesh over the whole film, so neighbouring pixels take different lens
-    samples (interleaved sampling, Keller and Heidrich 2001).  m = 1 is one tile, the
-    image itself.
+    samples (interleaved sampling, Keller and Heidrich 2001).  In one row, the rendered
+    rows of a band of image rows are a band too (``--adaptive``).  m = 1 is one tile,
+    the image itself.
 
     width, height : the output image (pixels).
     render_width, render_height : what POV-Ray renders (W', H').
@@ -163,10 +165,17 @@ def uv_model(width: int, height: int, jitter_px=(0.5, 0.5), version: str = "3.7.
 
 
 def pass_size(width: int, height: int, stride: int) -> tuple[int, int]:
-    """(W', H'): what POV-Ray renders for an interleaved pass of m = ``stride``: m x m
-    tiles of ceil(W / m) x ceil(H / m) pixels, plus FS#261's column and row."""
+    """(W', H'): what POV-Ray renders for an interleaved pass of m = ``stride``: m^2
+    tiles of ceil(W / m) x ceil(H / m) pixels in a row, plus FS#261's column and row."""
     m = int(stride)
-    return m * -(-int(width) // m) + 1, m * -(-int(height) // m) + 1
+    return m * m * -(-int(width) // m) + 1, -(-int(height) // m) + 1
+
+
+def pass_rows(rows: tuple[int, int], stride: int) -> tuple[int, int]:
+    """The rendered rows [R0, R1) (after the cut row) that hold the image rows ``rows``
+    [r0, r1) of every tile of an interleaved pass of m = ``stride``."""
+    m = int(stride)
+    return int(rows[0]) // m, -(-int(rows[1]) // m)
 
 
 def pass_models(width: int, height: int, stride: int, jitters, version: str = "3.7.0.10"
@@ -184,8 +193,8 @@ def pass_models(width: int, height: int, stride: int, jitters, version: str = "3
         for ox in range(m):
             j = jitters[ox + m * oy]
             out.append(UVModel(W, H, Wr, Hr, 1, 1, (float(j[0]), float(j[1])), m, (ox, oy),
-                               (ox * Wt, oy * Ht), (len(range(ox, W, m)), len(range(oy, H, m))),
-                               (Wt, Ht)))
+                               ((ox + m * oy) * Wt, 0),
+                               (len(range(ox, W, m)), len(range(oy, H, m))), (Wt, Ht)))
     return out
 
 

@@ -125,7 +125,8 @@ def pass_mask(node_x: np.ndarray, node_y: np.ndarray, node_margin: np.ndarray,
 
 def field_transmission(lens, film_distance_mm: float, film, plane_z_mm: float, pupil_xy_mm,
                        x, y, passed: np.ndarray) -> np.ndarray:
-    """(H, W) float32 transmission of a mask stop for one field lens sample: each passing
+    """(H, W) float32 transmission of a mask stop for one field lens sample (``pupil_xy_mm``
+    its pupil point (2,), or a :class:`povlens.pupil.field.PupilMap`): each passing
     pixel's ray, from its image position toward the pupil point, traced exactly to the stop
     (:func:`povlens.lens.tracer.stop_hits_from_film`; not interpolated from the grid, so a
     mask feature finer than a mesh cell is still seen), 0 where blocked.
@@ -143,9 +144,10 @@ def field_transmission(lens, film_distance_mm: float, film, plane_z_mm: float, p
     f = image_to_film_mm(film, np.asarray(x, float)[cols], np.asarray(y, float)[rows])
     origin = np.zeros((len(rows), 3))
     origin[:, :2] = f
+    P = pupil_xy_mm(f) if callable(pupil_xy_mm) else np.asarray(pupil_xy_mm, float)[None, :]
     direction = np.empty((len(rows), 3))
-    direction[:, 0] = pupil_xy_mm[0] - f[:, 0]
-    direction[:, 1] = pupil_xy_mm[1] - f[:, 1]
+    direction[:, 0] = P[:, 0] - f[:, 0]
+    direction[:, 1] = P[:, 1] - f[:, 1]
     direction[:, 2] = plane_z_mm
     hits = stop_hits_from_film(lens, film_distance_mm, origin, direction)
     row = lens.aperture_shape_row

@@ -27,16 +27,18 @@ import numpy as np
 from povlens.errors import PovlensError
 from povlens.plan.schema import Plan
 from povlens.pov.field_mesh import (build_field_mesh, combine_meshes, deinterleave, mesh2_text,
-                                    pass_models, placement_text)
+                                    pass_models, pass_rows, placement_text)
 from povlens.pupil.field import (PupilMap, concentric_disc_mm, field_sample_points, field_weight,
                                  tile_points, trace_field)
 from povlens.pupil.field_domain import FieldDomain, disc_domain
 from povlens.pupil.field_mask import field_transmission, pass_mask
 from povlens.pupil.rays import ScenePlacement
+from povlens.rendering.vignetting import mesh_illumination_map
 from povlens.util.files import write_bytes
 
 __all__ = ["placement_of", "FieldTile", "field_tiles", "field_domain_of", "sample_lens",
-           "mask_path", "write_field_sample", "field_sample_weight", "deinterleave_sample"]
+           "mask_path", "write_field_sample", "field_sample_weight", "image_layout",
+           "illumination_map", "render_rows"]
 
 
 def placement_of(plan: Plan) -> ScenePlacement:
@@ -84,14 +86,36 @@ def field_tiles(plan: Plan, k: int) -> list[FieldTile]:
             for m, p in zip(models, pts)]
 
 
-def deinterleave_sample(plan: Plan, image: np.ndarray) -> np.ndarray:
-    """A pass's image (after the cut row and column) with every pixel in its place."""
+def image_layout(plan: Plan):
+    """What puts the pixels of a sample's render (after its cut row and column) in
+    their places: :func:`povlens.pov.field_mesh.deinterleave` for an interleaved field
+    pass, else None."""
     fm, film = plan.field_mesh, plan.film
     if fm is None or fm.interleave == 1:
-        return image
+        return None
     models = pass_models(film.width_px, film.height_px, fm.interleave,
                          np.full((fm.interleave ** 2, 2), 0.5), plan.povray.version)
-    return deinterleave(image, models)
+    return lambda image: deinterleave(image, models)
+
+
+def render_rows(plan: Plan, k: int) -> tuple[int, int]:
+    """The rows [R0, R1) of sample k's render (after the cut row) that hold its film rows:
+    the film rows themselves, or in an interleaved field pass the tiles' rows holding them
+    (:func:`povlens.pov.field_mesh.pass_rows`)."""
+    fm = plan.field_mesh
+    rows = plan.rows_of_sample(k)
+    return rows if fm is None or fm.interleave == 1 else pass_rows(rows, fm.interleave)
+
+
+def illumination_map(outdir: Path, plan: Plan, table) -> np.ndarray | None:
+    """(H, W) the lens's exact relative illumination a field-mesh composite is scaled by
+    (:func:`povlens.rendering.composite.measurement_image`, a ratio estimator), or None
+    where the composite keeps the measurement's own estimate: per-pixel meshes (their
+    samples follow each pixel's region, so their weights have no steps) and grey
+    aperture masks (whose transmission the map does not hold)."""
+    if plan.field_mesh is None or plan.inputs.aperture_image:
+        return None
+    return mesh_illumination_map(outdir, plan, table)
 
 
 def sample_lens(plan: Plan, lens, k: int):

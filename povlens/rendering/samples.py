@@ -58,14 +58,13 @@ from povlens.pupil.sampling import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
 from povlens.rendering.composite import accumulate_samples, measurement_image
 from povlens.rendering.pixel_sampler import pixel_sampler
-from povlens.rendering.vignetting import mesh_illumination_map
 from povlens.rendering.spectral import plan_channel_factors
 from povlens.util.images import read_image, write_exr, write_png_srgb
 from povlens.pupil.rays import sample_points, sample_rays
 from povlens.pov.mesh import write_ray_mesh
-from povlens.rendering.field_samples import (deinterleave_sample, field_sample_weight,
-                                             mask_path, placement_of, sample_lens,
-                                             write_field_sample)
+from povlens.rendering.field_samples import (field_sample_weight, illumination_map,
+                                             image_layout as _layout, mask_path, placement_of,
+                                             render_rows, sample_lens, write_field_sample)
 from povlens.rendering.groups import group_sums, grouped
 from povlens.util.files import write_text
 from povlens.util.signals import interrupts_deferred
@@ -283,7 +282,7 @@ class _SampleRenders:
                 library_paths=[Path(self.plan.inputs.scene).parent],
                 povray_options=self.povray_options,
                 extra_args=[*MESH_SWITCHES, f"Declare=PovlensFrame={k}",
-                            *film_row_args(pv, self.plan.rows_of_sample(k))])
+                            *film_row_args(pv, render_rows(self.plan, k))])
             cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
             with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:
                 proc = start_povray(cmd, self.samples, err)
@@ -459,25 +458,6 @@ def render_view(outdir: str | os.PathLike, view: str) -> Path:
     return out
 
 
-def _layout(plan: Plan):
-    """What puts a sample image's pixels in place (interleaved field passes), or None."""
-    fm = plan.field_mesh
-    if fm is None or fm.interleave == 1:
-        return None
-    return lambda img: deinterleave_sample(plan, img)
-
-
-def illumination_map(outdir: Path, plan: Plan, table) -> np.ndarray | None:
-    """(H, W) the lens's exact relative illumination that a field-mesh composite is
-    scaled by (:func:`povlens.rendering.composite.measurement_image`), or None where
-    the composite keeps the measurement's own estimate: per-pixel meshes (their
-    samples follow each pixel's region, so their weights have no steps) and grey
-    aperture masks (whose transmission the map does not hold)."""
-    if plan.field_mesh is None or plan.inputs.aperture_image:
-        return None
-    return mesh_illumination_map(outdir, plan, table)
-
-
 def _finish_image(outdir: Path, image: np.ndarray) -> None:
     write_exr(outdir / "image.exr", image.astype(np.float32))
     write_png_srgb(outdir / "image.png", np.clip(image, 0.0, None))
@@ -528,7 +508,7 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
             drop_top_rows=drop, drop_right_columns=plan.povray.drop_right_columns,
             channel_weights=None if spectral is None else spectral[rendered],
             transform=_layout(plan))
-        ri = illumination_map(outdir, plan, table) if vignetting else None
+        ri = illumination_map(outdir, plan, table) if vignetting else None   # field meshes
         image = measurement_image(total, wsum, n_p, exposure if vignetting else None, ri)
     if write:
         _finish_image(outdir, image.astype(np.float32))

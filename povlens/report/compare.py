@@ -19,6 +19,12 @@ channel of every counted pixel weighted equally:
 Without a mask these come from OpenImageIO's own ``ImageBufAlgo.compare``;
 with a mask (pixels where any channel of the mask is non-zero count) they are
 computed with numpy in float64 (the tests check both ways agree).
+
+What the eye sees of a difference: :func:`flip_error`, NVIDIA's FLIP (Andersson et al.
+2020, the ``flip-evaluator`` package), LDR-FLIP of the sRGB previews (linear light
+clipped to [0, 1] and sRGB-encoded, as ``image.png`` shows it) at its default 67 pixels
+per degree: a per-pixel error in [0, 1] and its mean.  It ranks structured errors --
+steps, ghost copies, rings -- above noise of the same RMSE, which RMSE alone does not.
 """
 
 from __future__ import annotations
@@ -31,7 +37,12 @@ import OpenImageIO as oiio
 from povlens.errors import PovlensError
 
 __all__ = ["CompareError", "PSNR_PEAK", "colour_channels", "compare_arrays", "numpy_metrics",
-           "oiio_metrics", "difference_magnitude", "false_colour"]
+           "oiio_metrics", "difference_magnitude", "false_colour", "flip_error", "srgb_preview",
+           "FLIP_PPD"]
+
+#: FLIP's viewing condition: pixels per degree of visual angle (its default, a 0.7 m
+#: distant 24" 4K monitor).
+FLIP_PPD = 67.0
 
 #: Peak signal of the PSNR: linear white.
 PSNR_PEAK = 1.0
@@ -168,3 +179,39 @@ def false_colour(err: np.ndarray, scale: float | None = None, cmap: str = "infer
     import matplotlib
     rgb = matplotlib.colormaps[cmap](t)[:, :, :3]
     return np.ascontiguousarray(rgb, dtype=np.float32), float(scale)
+
+
+def srgb_preview(a: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float32: linear light clipped to [0, 1] and sRGB-encoded, as the PNG
+    preview shows it (grey images are repeated to three channels; alpha is dropped)."""
+    a = _hwc(a, "image")
+    nc = colour_channels(a.shape[2])
+    x = np.clip(np.nan_to_num(a[:, :, :nc].astype(np.float64), nan=0.0, posinf=1.0), 0.0, 1.0)
+    if nc == 1:
+        x = np.repeat(x, 3, axis=2)
+    enc = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return np.ascontiguousarray(enc, dtype=np.float32)
+
+
+def flip_error(reference: np.ndarray, test: np.ndarray, mask: np.ndarray | None = None,
+               name_a: str = "A", name_b: str = "B", name_mask: str = "mask",
+               ppd: float = FLIP_PPD) -> tuple[float, np.ndarray]:
+    """The mean FLIP error of ``test`` against ``reference`` and its (H, W) map.
+
+    Both are linear (H, W, C) images; FLIP compares their sRGB previews
+    (:func:`srgb_preview`, LDR-FLIP) at ``ppd`` pixels per degree.  The map is in [0, 1]
+    (0 where the eye sees no difference); the mean is over the mask's pixels (all
+    without a mask).
+    """
+    a, b, _ = _check_pair(reference, test, name_a, name_b)
+    sel = None if mask is None else _mask_pixels(mask, a.shape[:2], name_mask)
+    if sel is not None and not sel.any():
+        raise CompareError(f"mask {name_mask} has no non-zero pixel; nothing to compare")
+    import flip_evaluator
+    err, _, _ = flip_evaluator.evaluate(srgb_preview(a), srgb_preview(b), "LDR",
+                                        inputsRGB=True, applyMagma=False,
+                                        computeMeanError=False,
+                                        parameters={"ppd": float(ppd)})
+    err = np.asarray(err, dtype=np.float64).reshape(a.shape[:2])
+    mean = float(err.mean() if sel is None else err[sel].mean())
+    return mean, err

@@ -105,8 +105,8 @@ def test_plan_records_the_shape_and_lens_for_rebuilds_it(renders):
     assert "aperture_image" not in inp
     lens = lens_for(plan)
     assert lens.aperture_shape.blades == 6 and lens.aperture_shape.rotation_deg == 10.0
-    fm = plan.field_mesh
-    assert fm.iris_domain_radius_mm is not None
+    # field meshes draw from the round stop's ellipses, which hold the iris's regions
+    assert plan.field_mesh.domain is not None and plan.pixel_iris is None
     _, ring_out = renders["ring"]
     ring_plan = read_plan(ring_out / "plan.json")
     assert ring_plan.inputs.aperture_image_sha256
@@ -194,18 +194,20 @@ def test_iris_domain_with_dispersion_holds_every_wavelength(tmp_path):
             worst, worst_d = max(worst, gauge.max() / rd), max(worst_d, gauge.max() / rd_d)
     print(f"largest gauge of a passing ray / R_D: band {worst:.4f}, d line {worst_d:.4f}")
     assert worst <= 1.0
-    # the planner uses it: the field meshes sample the polygon inside the band's disc
+    # the planner uses it: per-pixel meshes sample the polygon inside the band's disc
     out = tmp_path / "p"
     assert main(["convert", str(ROOT / "scenes" / "chart.pov"), "--lens", "tessar.50mm",
                  "--method", "mesh", "--samples", "4", "--width", "64", "--height", "48",
                  "--focus", "2", "--aperture-blades", "6", "--blade-rotation", "10",
-                 "--dispersion", "-o", str(out)]) == 0
-    fm = read_plan(out).field_mesh
-    assert read_plan(out).inputs.dispersion and fm.iris_domain_radius_mm is not None
+                 "--dispersion", "--ray-mesh", "pixel", "-o", str(out)]) == 0
+    plan = read_plan(out)
+    pi = plan.pixel_iris
+    assert plan.inputs.dispersion and pi is not None
+    assert pi["domain_radius_mm"] > 0 and pi["flip"] == flip
     u = concentric_disc_mm(rng.random((4000, 2)), 1.0)
-    polygon = np.array([iris_point_mm(shape, fm.iris_flip, fm.iris_domain_radius_mm,
-                                      fm.pupil_disc_radius_mm, p)[0] for p in u])
-    disc = u * fm.pupil_disc_radius_mm
+    polygon = np.array([iris_point_mm(shape, pi["flip"], pi["domain_radius_mm"],
+                                      pi["disc_radius_mm"], p)[0] for p in u])
+    disc = u * pi["disc_radius_mm"]
     axis = np.zeros((len(u), 3))
     passes = [trace_from_film(lens, fd, axis, np.c_[q, np.full(len(q), table.plane_z_mm)]
                               ).passed.mean() for q in (polygon, disc)]
