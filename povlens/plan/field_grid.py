@@ -162,6 +162,15 @@ def choose_field_mesh(lens, film_distance_mm: float, film, table, placement, efl
         if err <= LIMIT_PX or grid[0] >= _grid_limit(W):
             break
         gx = int(math.ceil(grid[0] * math.sqrt(err / TARGET_PX) * 1.05))
+    if err < 0.5 * TARGET_PX and grid[0] > g0[0]:
+        # the rule overshot from a coarse trial (the error is not yet second order
+        # there): once more from this grid's own error, kept if it still certifies
+        smaller = _grid_for_width(int(math.ceil(grid[0] * math.sqrt(err / TARGET_PX) * 1.05)),
+                                  W, H)
+        if smaller[0] < grid[0]:
+            err2, origin2 = _max_error(ctx, smaller, eps, points, rows, cols, cache)
+            if err2 <= LIMIT_PX:
+                grid, err, origin = smaller, err2, origin2
     if err > LIMIT_PX:
         return None, (f"interpolated ray meshes of this lens keep a ray error of {err:.3g} px "
                       f"at {grid[0]}x{grid[1]} faces (limit {LIMIT_PX} px), so its lens samples "

@@ -54,6 +54,8 @@ N_RADII = 193
 FIT_DEGREE = 4
 #: Relative margin of the ellipses over the largest ratio that holds every polygon.
 DOMAIN_MARGIN = 2e-3
+#: Beyond the table's last radius R, s = (r / R)^2 saturates below 1 + this.
+SATURATION = 0.1
 #: Weight of a point the fit passes below, in the asymmetric least squares.
 UPPER_WEIGHT = 50.0
 
@@ -78,6 +80,11 @@ class FieldDomain:
     def _axes(self, film_xy: np.ndarray):
         f = np.asarray(film_xy, dtype=np.float64).reshape(-1, 2)
         s = np.einsum("ij,ij->i", f, f) / (self.radius_mm * self.radius_mm)
+        # beyond R no light passes; the polynomials are held near their value at R
+        # (s -> 1 + d (1 - exp((1 - s) / d)), continuous with its slope, below 1 + d),
+        # so the ray field stays smooth and bounded where a mesh reaches past the edge
+        d = SATURATION
+        s = np.where(s <= 1.0, s, 1.0 + d * (1.0 - np.exp(np.minimum(1.0 - s, 0.0) / d)))
         c = np.polynomial.polynomial.polyval(s, self.centre)
         b = np.polynomial.polynomial.polyval(s, self.tangential)
         d = np.polynomial.polynomial.polyval(s, self.radial_excess)
@@ -151,7 +158,9 @@ def _upper_fit(X: np.ndarray, y: np.ndarray, iterations: int = 12) -> np.ndarray
 
 def field_domain(table, degree: int = FIT_DEGREE) -> FieldDomain:
     """The ellipse family holding ``table``'s region at every film radius (module
-    docstring); the bounding disc where no such fit holds.
+    docstring); the bounding disc where no such fit holds.  ``efficiency`` is the
+    smallest share of the domain the table's region fills where the region is at
+    least a tenth of its largest.
 
     Parameters
     ----------
@@ -159,6 +168,19 @@ def field_domain(table, degree: int = FIT_DEGREE) -> FieldDomain:
         ``--dispersion``, which holds every wavelength's region).
     degree : degree of the polynomials in s.
     """
+    dom = _fitted_domain(table, degree)
+    R = float(table.max_film_radius_mm)
+    ext = _polygon_extents(table, np.linspace(0.0, R, 65)) if R > 0 else []
+    if not ext:
+        return dom
+    r = np.array([e[0] for e in ext])
+    area = np.array([e[5] for e in ext])
+    eff = area / dom.area_mm2(np.stack([r, np.zeros_like(r)], 1))
+    return dataclasses.replace(dom, efficiency=float(eff[area >= 0.1 * area.max()].min()))
+
+
+def _fitted_domain(table, degree: int) -> FieldDomain:
+    """The fitted ellipse family, or the bounding disc."""
     from povlens.pupil.field import bounding_disc_radius_mm
     R = float(table.max_film_radius_mm)
     rb = bounding_disc_radius_mm(table)
@@ -199,16 +221,13 @@ def field_domain(table, degree: int = FIT_DEGREE) -> FieldDomain:
     tang_l = np.polynomial.polynomial.polymul(lift, tang)
     excess_l = np.polynomial.polynomial.polymul(lift, excess)
     dom = FieldDomain(R, tuple(centre), tuple(tang_l), tuple(excess_l), 0.0)
-    # positive axes wherever a film point may pass light (beyond R none does)
-    probe = np.linspace(0.0, R, 257)
+    # positive axes wherever the map is evaluated (beyond R, s saturates below 1 + d)
+    probe = np.linspace(0.0, math.sqrt(1.0 + SATURATION) * R, 257)
     a, b = dom.semi_axes_mm(np.stack([probe, np.zeros_like(probe)], 1))
     if not (np.all(a > 0) and np.all(b > 0)):
         return disc_domain(rb, R)
-    eff = area / dom.area_mm2(np.stack([r, np.zeros_like(r)], 1))
-    # a sliver's share says little: the smallest share where the region is 10 % of its largest
-    eff = float(eff[area >= 0.1 * area.max()].min())
     # the disc when the ellipses are not smaller over the frame (film area weighted)
     ellipse = dom.area_mm2(np.stack([r, np.zeros_like(r)], 1))
     if np.sum(r * ellipse) >= math.pi * rb * rb * np.sum(r):
-        return disc_domain(rb, R, eff)
-    return dataclasses.replace(dom, efficiency=eff)
+        return disc_domain(rb, R)
+    return dom
