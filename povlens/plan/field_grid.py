@@ -94,18 +94,23 @@ def _max_error(ctx, grid, eps, points, rows, cols, exact_cache) -> tuple[float, 
     return worst, worst_origin
 
 
+#: A grid whose certified error is below this share of :data:`TARGET_PX` is coarsened once.
+SHRINK_BELOW = 0.6
 #: Faces a pass may hold in all (m^2 tiles of the grid's): POV-Ray 3.7 finds a pixel's
 #: face by testing, in order, the faces that share its cell of a fixed 10 x 10 UV grid,
 #: so a pass costs more with more faces (docs/decisions/exact-lens-distribution3.md).
-PASS_FACE_BUDGET = 4000
+PASS_FACE_BUDGET = 6000
+#: Pixels a tile keeps at least: each tile costs povlens a mesh of its own (5-15 ms),
+#: which a small tile's share of POV-Ray's work would not pay for.
+MIN_TILE_PIXELS = 4096
 #: The largest interleave tried.
 MAX_INTERLEAVE = 4
 
 
 def interleave_for(grid: tuple[int, int], width: int, height: int) -> int:
     """m: the largest m <= :data:`MAX_INTERLEAVE` whose m^2 tiles of ``grid`` (2 gx gy
-    faces each) stay within :data:`PASS_FACE_BUDGET` faces, and whose tiles keep 8
-    pixels across.  ``POVLENS_INTERLEAVE`` overrides it (measurements)."""
+    faces each) stay within :data:`PASS_FACE_BUDGET` faces, and whose tiles keep
+    :data:`MIN_TILE_PIXELS` pixels.  ``POVLENS_INTERLEAVE`` overrides it (measurements)."""
     import os
     forced = os.environ.get("POVLENS_INTERLEAVE")
     if forced:
@@ -113,7 +118,7 @@ def interleave_for(grid: tuple[int, int], width: int, height: int) -> int:
     faces = 2 * int(grid[0]) * int(grid[1])
     m = 1
     while (m < MAX_INTERLEAVE and (m + 1) ** 2 * faces <= PASS_FACE_BUDGET
-           and min(width, height) >= 8 * (m + 1)):
+           and width * height >= MIN_TILE_PIXELS * (m + 1) ** 2):
         m += 1
     return m
 
@@ -162,9 +167,10 @@ def choose_field_mesh(lens, film_distance_mm: float, film, table, placement, efl
         if err <= LIMIT_PX or grid[0] >= _grid_limit(W):
             break
         gx = int(math.ceil(grid[0] * math.sqrt(err / TARGET_PX) * 1.05))
-    if err < 0.5 * TARGET_PX and grid[0] > g0[0]:
-        # the rule overshot from a coarse trial (the error is not yet second order
-        # there): once more from this grid's own error, kept if it still certifies
+    if err < SHRINK_BELOW * TARGET_PX and grid[0] > 4:
+        # finer than the target needs (the rule overshot from a coarse trial, or the
+        # trial grid was already fine): once more from this grid's own error, kept if
+        # it still certifies; fewer faces make every pass cheaper (interleave_for)
         smaller = _grid_for_width(int(math.ceil(grid[0] * math.sqrt(err / TARGET_PX) * 1.05)),
                                   W, H)
         if smaller[0] < grid[0]:

@@ -44,11 +44,12 @@ def _second_difference_bound(grid: np.ndarray) -> float:
 
 
 def _classify(margin: np.ndarray, delta: np.ndarray) -> np.ndarray:
-    """(ny, nx) classes of the cells of a (ny+1, nx+1, S) node grid of margins."""
-    c = np.stack([margin[:-1, :-1], margin[:-1, 1:], margin[1:, :-1], margin[1:, 1:]], 2)
-    finite = np.isfinite(c).all(3)
-    sure_pass = np.all(c > delta, axis=(2, 3)) & finite.all(2)
-    sure_fail = np.any(np.all(c < -delta, axis=2), axis=2) | ~finite.any(2)
+    """(..., ny, nx) classes of the cells of (..., ny+1, nx+1, S) node grids of margins."""
+    c = np.stack([margin[..., :-1, :-1, :], margin[..., :-1, 1:, :], margin[..., 1:, :-1, :],
+                  margin[..., 1:, 1:, :]], -2)                     # (..., ny, nx, 4, S)
+    finite = np.isfinite(c).all(-1)
+    sure_pass = np.all(c > delta, axis=(-2, -1)) & finite.all(-1)
+    sure_fail = np.any(np.all(c < -delta, axis=-2), axis=-1) | ~finite.any(-1)
     return np.where(sure_pass, PASS, np.where(sure_fail, FAIL, UNSURE)).astype(np.int8)
 
 
@@ -87,37 +88,34 @@ def pass_mask(node_x: np.ndarray, node_y: np.ndarray, node_margin: np.ndarray,
     unsure = np.argwhere(cls == UNSURE)
     traced = 0
     if len(unsure):
-        subs = []
-        for r, c in unsure:
-            x0, x1, y0, y1 = node_x[c], node_x[c + 1], node_y[r], node_y[r + 1]
-            sx = np.linspace(x0, x1, max(1, int(np.ceil((x1 - x0) / sub_px))) + 1)
-            sy = np.linspace(y0, y1, max(1, int(np.ceil((y1 - y0) / sub_px))) + 1)
-            subs.append((r, c, sx, sy))
-        X = np.concatenate([np.tile(sx, len(sy))
-                            for _, _, sx, sy in subs])
-        Y = np.concatenate([np.repeat(sy, len(sx)) for _, _, sx, sy in subs])
-        margins = trace(X, Y).margin_mm2
-        traced = len(X)
-        off = 0
-        exact_rows, exact_cols = [], []
-        for r, c, sx, sy in subs:
-            n = len(sx) * len(sy)
-            sub_margin = margins[off:off + n].reshape(len(sy), len(sx), S)
-            off += n
-            ratio = max(sx[1] - sx[0], sy[1] - sy[0]) / max(node_x[c + 1] - node_x[c],
-                                                            node_y[r + 1] - node_y[r])
-            sub_cls = _classify(sub_margin, delta * ratio * ratio)
-            cols, rows = np.flatnonzero(ccol == c), np.flatnonzero(crow == r)
-            if not len(cols) or not len(rows):
-                continue
-            k = sub_cls[_cells_of(pixel_y[rows], sy)[:, None], _cells_of(pixel_x[cols], sx)[None, :]]
-            passed[np.ix_(rows, cols)] = k == PASS
-            uj, ui = np.nonzero(k == UNSURE)
-            if len(uj):
-                exact_rows.append(rows[uj])
-                exact_cols.append(cols[ui])
-        if exact_rows:
-            rr, cc = np.concatenate(exact_rows), np.concatenate(exact_cols)
+        # every cell has the grid's size: one sub-grid for all, traced in one call
+        r, c = unsure[:, 0], unsure[:, 1]
+        dx = float(np.max(np.diff(node_x)))
+        dy = float(np.max(np.diff(node_y)))
+        nx, ny = max(1, int(np.ceil(dx / sub_px))), max(1, int(np.ceil(dy / sub_px)))
+        x0, x1 = node_x[c], node_x[c + 1]
+        y0, y1 = node_y[r], node_y[r + 1]
+        fx, fy = np.linspace(0.0, 1.0, nx + 1), np.linspace(0.0, 1.0, ny + 1)
+        X = np.broadcast_to(x0[:, None, None] + fx[None, None, :] * (x1 - x0)[:, None, None],
+                            (len(r), ny + 1, nx + 1))
+        Y = np.broadcast_to(y0[:, None, None] + fy[None, :, None] * (y1 - y0)[:, None, None],
+                            (len(r), ny + 1, nx + 1))
+        margins = trace(X.ravel(), Y.ravel()).margin_mm2.reshape(len(r), ny + 1, nx + 1, S)
+        traced = X.size
+        ratio = max(1.0 / nx * dx, 1.0 / ny * dy) / max(dx, dy)
+        sub = _classify(margins, delta * ratio * ratio)                       # (n, ny, nx)
+        cell_id = np.full(cls.shape, -1)
+        cell_id[r, c] = np.arange(len(r))
+        cid = cell_id[crow[:, None], ccol[None, :]]
+        rows, cols = np.nonzero(cid >= 0)
+        k = cid[rows, cols]
+        sx = np.clip(((pixel_x[cols] - x0[k]) / (x1 - x0)[k] * nx).astype(np.int64), 0, nx - 1)
+        sy = np.clip(((pixel_y[rows] - y0[k]) / (y1 - y0)[k] * ny).astype(np.int64), 0, ny - 1)
+        kind = sub[k, sy, sx]
+        passed[rows, cols] = kind == PASS
+        exact = kind == UNSURE
+        if exact.any():
+            rr, cc = rows[exact], cols[exact]
             passed[rr, cc] = trace(pixel_x[cc], pixel_y[rr]).passed
             traced += len(rr)
     return passed, {"traced_fraction": traced / passed.size, "unsure_cells": int(len(unsure))}
