@@ -284,8 +284,10 @@ def _summary(plan: Plan) -> str:
          f"{e['min_relative_illumination']:.3f} of the centre" if e else
          "model error: not measured (a pinhole render needs none)"),
         *([f"ray meshes: {plan.field_mesh.grid[0]}x{plan.field_mesh.grid[1]} faces, rays within "
-           f"{plan.field_mesh.max_ray_error_px:.3f} px of the exact ones (measured)"]
-          if plan.field_mesh is not None else []),
+           f"{plan.field_mesh.max_ray_error_px:.3f} px of the exact ones (measured); "
+           f"{plan.field_mesh.interleave}x{plan.field_mesh.interleave} interleaved tiles, "
+           f"pupil ellipses {plan.field_mesh.domain['efficiency']:.2f} filled"]
+          if plan.field_mesh is not None and plan.field_mesh.domain else []),
         *([f"colour (F-C): lateral up to {plan.dispersion['max_lateral_colour_px']:.3g} px, "
            f"longitudinal {plan.dispersion['longitudinal_colour_mm'] or 0.0:.3g} mm"
            + ("" if plan.inputs.dispersion else " (not rendered)")]

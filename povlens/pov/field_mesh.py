@@ -45,7 +45,8 @@ from povlens.pov.process import pixel_range_args
 from povlens.pupil.field import trace_field
 
 __all__ = ["UVModel", "uv_model", "pass_models", "pass_size", "pass_rows", "deinterleave",
-           "FieldMesh",
+           "FieldMesh", "MeshPoints", "mesh_points", "build_field_meshes", "encode_field_mesh",
+           "take_rays",
            "PassMesh", "combine_meshes", "lens_ray_field", "build_field_mesh", "mesh2_text",
            "placement_text", "FIT_SUBDIVISION", "MESH_NAME", "TRANSFORM_NAME"]
 
@@ -303,9 +304,38 @@ def lens_ray_field(lens: LensPrescription, film_distance_mm: float, film: Film,
     return field
 
 
+@dataclasses.dataclass(frozen=True)
+class MeshPoints:
+    """Where a tile's mesh needs rays: its vertices (UVs ``uv`` (V, 2), faces (F, 3), image
+    positions ``x``, ``y`` (V,)) and the fit's finer grid (UVs ``fit_uv`` (n, 2), image
+    positions ``fit_x``, ``fit_y``)."""
+
+    uv: np.ndarray
+    faces: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    fit_uv: np.ndarray
+    fit_x: np.ndarray
+    fit_y: np.ndarray
+
+
+def mesh_points(model: UVModel, grid: tuple[int, int]) -> MeshPoints:
+    """The vertex and fit sample positions of a tile's ``grid`` (:func:`uv_grid`)."""
+    gx, gy = int(grid[0]), int(grid[1])
+    uv, faces = uv_grid(gx, gy, model)
+    x, y = model.uv_to_image(uv[:, 0], uv[:, 1])
+    k = FIT_SUBDIVISION
+    rect = model.uv_rect()
+    U, V = np.meshgrid(np.linspace(rect[0], rect[1], gx * k + 1),
+                       np.linspace(rect[2], rect[3], gy * k + 1))
+    fit_uv = np.stack([U.ravel(), V.ravel()], 1)
+    fx, fy = model.uv_to_image(fit_uv[:, 0], fit_uv[:, 1])
+    return MeshPoints(uv, faces, x, y, fit_uv, fx, fy)
+
+
 def build_field_mesh(ray_field, placement, model: UVModel, grid: tuple[int, int], eps: float,
                      pixel_angle_rad: float, origin_world=None) -> FieldMesh:
-    """Trace and encode the ray mesh of one lens sample.
+    """Trace and encode the ray mesh of one lens sample's tile.
 
     ray_field : callable (x (n,), y (n,)) image positions (pixels) -> an object with
         camera-frame ``origin_mm`` (n, 3), unit ``direction`` (n, 3), ``exists``,
@@ -319,10 +349,44 @@ def build_field_mesh(ray_field, placement, model: UVModel, grid: tuple[int, int]
         matrix's translation; default the middle of the ray origins): the tiles of one
         pass share it (:func:`combine_meshes`).
     """
+    pts = mesh_points(model, grid)
+    return encode_field_mesh(pts, ray_field(pts.x, pts.y), ray_field(pts.fit_x, pts.fit_y),
+                             placement, model, grid, eps, pixel_angle_rad, origin_world)
+
+
+def build_field_meshes(ray_field, placement, models: list[UVModel], grid: tuple[int, int],
+                       eps: float, pixel_angle_rad: float) -> list[FieldMesh]:
+    """:func:`build_field_mesh` of every tile of a pass, each stage's rays traced in one
+    call: ``ray_field(x, y, tile)`` traces image positions of the tiles ``tile`` (n,)
+    (indices into ``models``).  The tiles share the first one's ``origin_world``."""
+    pts = [mesh_points(m, grid) for m in models]
+    tile_v = np.concatenate([np.full(len(p.x), i) for i, p in enumerate(pts)])
+    tile_f = np.concatenate([np.full(len(p.fit_x), i) for i, p in enumerate(pts)])
+    rays_v = ray_field(np.concatenate([p.x for p in pts]), np.concatenate([p.y for p in pts]),
+                       tile_v)
+    rays_f = ray_field(np.concatenate([p.fit_x for p in pts]),
+                       np.concatenate([p.fit_y for p in pts]), tile_f)
+    out, origin = [], None
+    for i, (m, p) in enumerate(zip(models, pts)):
+        mesh = encode_field_mesh(p, take_rays(rays_v, tile_v == i), take_rays(rays_f, tile_f == i),
+                                 placement, m, grid, eps, pixel_angle_rad, origin)
+        origin = mesh.matrix[3]
+        out.append(mesh)
+    return out
+
+
+def take_rays(rays, sel):
+    """The rays ``sel`` (a boolean or index array) of a :class:`povlens.pupil.field.FieldRays`."""
+    return dataclasses.replace(rays, origin_mm=rays.origin_mm[sel], direction=rays.direction[sel],
+                               exists=rays.exists[sel], margin_mm2=rays.margin_mm2[sel],
+                               passed=rays.passed[sel])
+
+
+def encode_field_mesh(pts: MeshPoints, rays, fit_rays, placement, model: UVModel,
+                      grid: tuple[int, int], eps: float, pixel_angle_rad: float,
+                      origin_world=None) -> FieldMesh:
+    """The ray mesh of a tile from its rays at ``pts`` (vertices, then the fit's grid)."""
     gx, gy = int(grid[0]), int(grid[1])
-    uv, faces = uv_grid(gx, gy, model)
-    x, y = model.uv_to_image(uv[:, 0], uv[:, 1])
-    rays = ray_field(x, y)
     R = placement.basis
     S = np.array([eps, eps, 1.0])
     direction = _fill_missing(rays.direction, rays.exists, gx, gy)
@@ -332,11 +396,11 @@ def build_field_mesh(ray_field, placement, model: UVModel, grid: tuple[int, int]
     vertex = ((p - T) @ R.T) / S
     normal = direction * S
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    normal, err = _fit_normals(ray_field, model, (gx, gy), faces, normal, S, pixel_angle_rad)
+    normal, err = _fit_normals(pts, fit_rays, model, (gx, gy), normal, S, pixel_angle_rad)
     matrix = np.vstack([S[:, None] * R, T])
-    vertex = _separate_filled(vertex, faces, rays.exists)
-    return FieldMesh((gx, gy), uv, np.stack([x, y], 1), vertex, normal, matrix, faces,
-                     rays.exists, rays.margin_mm2, err, float(eps), model.uv_rect())
+    vertex = _separate_filled(vertex, pts.faces, rays.exists)
+    return FieldMesh((gx, gy), pts.uv, np.stack([pts.x, pts.y], 1), vertex, normal, matrix,
+                     pts.faces, rays.exists, rays.margin_mm2, err, float(eps), model.uv_rect())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -395,40 +459,54 @@ def _separate_filled(vertex: np.ndarray, faces: np.ndarray, exists: np.ndarray) 
                        "--ray-mesh pixel")
 
 
-def _fit_normals(ray_field, model, grid, faces, normal0, S, pixel_angle_rad):
+def _fit_normals(pts: MeshPoints, rays, model, grid, normal0, S, pixel_angle_rad):
     """Least-squares vertex normals n minimising sum_s |sum_k B_k(s) n_k - t_s|^2 over a
-    grid FIT_SUBDIVISION times finer than the mesh (t_s = normalize(d_s S), what a
-    vertex at s would store), only where the lens passes light; and the largest
-    angle left, in pixels.  Vertices no such sample touches keep their own ray
-    (weak prior)."""
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spl
-    gx, gy = grid
-    k = FIT_SUBDIVISION
-    rect = model.uv_rect()
-    U, V = np.meshgrid(np.linspace(rect[0], rect[1], gx * k + 1),
-                       np.linspace(rect[2], rect[3], gy * k + 1))
-    su, sv = U.ravel(), V.ravel()
-    x, y = model.uv_to_image(su, sv)
-    rays = ray_field(x, y)
-    use = rays.passed
+    grid FIT_SUBDIVISION times finer than the mesh (``rays`` at ``pts.fit_uv``; t_s =
+    normalize(d_s S), what a vertex at s would store), wherever the unclipped ray
+    exists (the field is smooth across vignetting cuts, so fitting it all is as good
+    where light passes, and every tile of every pass shares the factorisation:
+    :func:`_fit_solver`); and the largest angle left where the lens passes light, in
+    pixels.  Vertices no sample touches keep their own ray (weak prior)."""
+    use = rays.exists
     if not use.any():
         return normal0, 0.0
-    face, B = locate_in_grid(grid, rect, su[use], sv[use])
+    face, B = locate_in_grid(grid, model.uv_rect(), pts.fit_uv[use, 0], pts.fit_uv[use, 1])
     t = rays.direction[use] * S
     t /= np.linalg.norm(t, axis=1, keepdims=True)
-    n_s, n_v = int(use.sum()), len(normal0)
-    A = sp.csr_matrix((B.ravel(), (np.repeat(np.arange(n_s), 3), faces[face].ravel())),
-                      shape=(n_s, n_v))
-    lam = 1e-6
-    lu = spl.splu((A.T @ A + lam * sp.identity(n_v)).tocsc())
-    n = np.stack([lu.solve(A.T @ t[:, c] + lam * normal0[:, c]) for c in range(3)], 1)
+    At, lu, lam = _fit_solver(tuple(grid), use, face, B, pts.faces, len(normal0))
+    n = lu.solve(np.asarray(At @ t + lam * normal0))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     # what POV-Ray traces at the fit's samples: normalize(sum B n) mapped back by S^-1
-    d = (np.einsum("nk,nkd->nd", B, n.astype(np.float32).astype(float)[faces[face]])) / S
+    ok = rays.passed[use]
+    if not ok.any():
+        return n, 0.0
+    tri = pts.faces[face[ok]]
+    d = (np.einsum("nk,nkd->nd", B[ok], n.astype(np.float32).astype(float)[tri])) / S
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    err = np.arcsin(np.clip(np.linalg.norm(np.cross(d, rays.direction[use]), axis=1), 0, 1))
+    err = np.arcsin(np.clip(np.linalg.norm(np.cross(d, rays.direction[use][ok]), axis=1), 0, 1))
     return n, float(err.max() / pixel_angle_rad)
+
+
+_FIT_SOLVERS: dict = {}
+
+
+def _fit_solver(grid, use: np.ndarray, face, B, faces, n_v: int):
+    """(A^T, the factorised A^T A + lam I, lam) of the fit: the same for every tile whose
+    fit samples exist at the same places (kept for the last few grids)."""
+    import hashlib
+    key = (grid, n_v, hashlib.sha1(np.packbits(use).tobytes()).hexdigest())
+    if key not in _FIT_SOLVERS:
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spl
+        n_s = len(face)
+        A = sp.csr_matrix((B.ravel(), (np.repeat(np.arange(n_s), 3), faces[face].ravel())),
+                          shape=(n_s, n_v))
+        lam = 1e-6
+        At = A.T.tocsr()
+        if len(_FIT_SOLVERS) >= 8:
+            _FIT_SOLVERS.pop(next(iter(_FIT_SOLVERS)))
+        _FIT_SOLVERS[key] = (At, spl.splu((At @ A + lam * sp.identity(n_v)).tocsc()), lam)
+    return _FIT_SOLVERS[key]
 
 
 def _rows(a: np.ndarray, fmt: str) -> str:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["pass_mask", "field_transmission", "PASS", "FAIL", "UNSURE"]
+__all__ = ["pass_mask", "pass_masks", "field_transmission", "PASS", "FAIL", "UNSURE"]
 
 PASS, FAIL, UNSURE = 1, 2, 3
 
@@ -79,46 +79,87 @@ def pass_mask(node_x: np.ndarray, node_y: np.ndarray, node_margin: np.ndarray,
     passed : (H, W) bool.
     stats : {traced_fraction (rays traced / pixels), unsure_cells}.
     """
-    S = node_margin.shape[2]
-    delta = np.array([safety / 8.0 * _second_difference_bound(node_margin[..., i])
-                      for i in range(S)])
-    cls = _classify(node_margin, delta)
-    ccol, crow = _cells_of(pixel_x, node_x), _cells_of(pixel_y, node_y)
-    passed = cls[crow[:, None], ccol[None, :]] == PASS
-    unsure = np.argwhere(cls == UNSURE)
-    traced = 0
-    if len(unsure):
-        # every cell has the grid's size: one sub-grid for all, traced in one call
+    return pass_masks([(node_x, node_y, node_margin, pixel_x, pixel_y)],
+                      lambda x, y, tile: trace(x, y), safety, sub_px)[0]
+
+
+class _Tile:
+    """One grid's classification on the way (:func:`pass_masks`)."""
+
+    def __init__(self, node_x, node_y, node_margin, pixel_x, pixel_y, safety, sub_px):
+        self.node_x, self.node_y, self.pixel_x, self.pixel_y = node_x, node_y, pixel_x, pixel_y
+        self.S = node_margin.shape[2]
+        self.delta = np.array([safety / 8.0 * _second_difference_bound(node_margin[..., i])
+                               for i in range(self.S)])
+        cls = _classify(node_margin, self.delta)
+        self.ccol, self.crow = _cells_of(pixel_x, node_x), _cells_of(pixel_y, node_y)
+        self.passed = cls[self.crow[:, None], self.ccol[None, :]] == PASS
+        unsure = np.argwhere(cls == UNSURE)
+        self.n_unsure, self.traced = len(unsure), 0
+        if not len(unsure):
+            return
+        # every cell has the grid's size: one sub-grid for all of them
         r, c = unsure[:, 0], unsure[:, 1]
-        dx = float(np.max(np.diff(node_x)))
-        dy = float(np.max(np.diff(node_y)))
-        nx, ny = max(1, int(np.ceil(dx / sub_px))), max(1, int(np.ceil(dy / sub_px)))
-        x0, x1 = node_x[c], node_x[c + 1]
-        y0, y1 = node_y[r], node_y[r + 1]
-        fx, fy = np.linspace(0.0, 1.0, nx + 1), np.linspace(0.0, 1.0, ny + 1)
-        X = np.broadcast_to(x0[:, None, None] + fx[None, None, :] * (x1 - x0)[:, None, None],
-                            (len(r), ny + 1, nx + 1))
-        Y = np.broadcast_to(y0[:, None, None] + fy[None, :, None] * (y1 - y0)[:, None, None],
-                            (len(r), ny + 1, nx + 1))
-        margins = trace(X.ravel(), Y.ravel()).margin_mm2.reshape(len(r), ny + 1, nx + 1, S)
-        traced = X.size
-        ratio = max(1.0 / nx * dx, 1.0 / ny * dy) / max(dx, dy)
-        sub = _classify(margins, delta * ratio * ratio)                       # (n, ny, nx)
+        dx, dy = float(np.max(np.diff(node_x))), float(np.max(np.diff(node_y)))
+        self.nx, self.ny = max(1, int(np.ceil(dx / sub_px))), max(1, int(np.ceil(dy / sub_px)))
+        self.ratio = max(dx / self.nx, dy / self.ny) / max(dx, dy)
+        self.x0, self.x1, self.y0, self.y1 = node_x[c], node_x[c + 1], node_y[r], node_y[r + 1]
+        fx, fy = np.linspace(0.0, 1.0, self.nx + 1), np.linspace(0.0, 1.0, self.ny + 1)
+        shape = (len(r), self.ny + 1, self.nx + 1)
+        self.sub_x = np.broadcast_to(self.x0[:, None, None] + fx[None, None, :]
+                                     * (self.x1 - self.x0)[:, None, None], shape).ravel()
+        self.sub_y = np.broadcast_to(self.y0[:, None, None] + fy[None, :, None]
+                                     * (self.y1 - self.y0)[:, None, None], shape).ravel()
         cell_id = np.full(cls.shape, -1)
         cell_id[r, c] = np.arange(len(r))
-        cid = cell_id[crow[:, None], ccol[None, :]]
+        self.cell_id = cell_id
+
+    def classify_sub(self, margins: np.ndarray) -> None:
+        """Sub-cell classes from the sub-grid's margins; the pixels still unsure."""
+        n = len(self.x0)
+        sub = _classify(margins.reshape(n, self.ny + 1, self.nx + 1, self.S),
+                        self.delta * self.ratio * self.ratio)                # (n, ny, nx)
+        cid = self.cell_id[self.crow[:, None], self.ccol[None, :]]
         rows, cols = np.nonzero(cid >= 0)
         k = cid[rows, cols]
-        sx = np.clip(((pixel_x[cols] - x0[k]) / (x1 - x0)[k] * nx).astype(np.int64), 0, nx - 1)
-        sy = np.clip(((pixel_y[rows] - y0[k]) / (y1 - y0)[k] * ny).astype(np.int64), 0, ny - 1)
+        sx = np.clip(((self.pixel_x[cols] - self.x0[k]) / (self.x1 - self.x0)[k]
+                      * self.nx).astype(np.int64), 0, self.nx - 1)
+        sy = np.clip(((self.pixel_y[rows] - self.y0[k]) / (self.y1 - self.y0)[k]
+                      * self.ny).astype(np.int64), 0, self.ny - 1)
         kind = sub[k, sy, sx]
-        passed[rows, cols] = kind == PASS
+        self.passed[rows, cols] = kind == PASS
         exact = kind == UNSURE
-        if exact.any():
-            rr, cc = rows[exact], cols[exact]
-            passed[rr, cc] = trace(pixel_x[cc], pixel_y[rr]).passed
-            traced += len(rr)
-    return passed, {"traced_fraction": traced / passed.size, "unsure_cells": int(len(unsure))}
+        self.exact_rows, self.exact_cols = rows[exact], cols[exact]
+        self.traced = len(self.sub_x) + len(self.exact_rows)
+
+
+def pass_masks(grids, trace, safety: float = 4.0, sub_px: float = 4.0
+               ) -> list[tuple[np.ndarray, dict]]:
+    """:func:`pass_mask` of several grids at once (the tiles of an interleaved pass), each
+    stage's rays traced in one call: ``grids`` is a list of (node_x, node_y, node_margin,
+    pixel_x, pixel_y), ``trace(x, y, tile)`` traces image positions of the tiles ``tile``
+    (n,) (indices into ``grids``)."""
+    tiles = [_Tile(*g, safety, sub_px) for g in grids]
+    todo = [i for i, t in enumerate(tiles) if t.n_unsure]
+
+    def traced(xs, ys):
+        tile = np.concatenate([np.full(len(x), i) for i, x in zip(todo, xs)])
+        out = trace(np.concatenate(xs), np.concatenate(ys), tile)
+        return np.split(np.arange(len(tile)), np.cumsum([len(x) for x in xs])[:-1]), out
+
+    if todo:
+        parts, out = traced([tiles[i].sub_x for i in todo], [tiles[i].sub_y for i in todo])
+        for i, idx in zip(todo, parts):
+            tiles[i].classify_sub(out.margin_mm2[idx])
+        todo = [i for i in todo if len(tiles[i].exact_rows)]
+    if todo:
+        t = tiles
+        parts, out = traced([t[i].pixel_x[t[i].exact_cols] for i in todo],
+                            [t[i].pixel_y[t[i].exact_rows] for i in todo])
+        for i, idx in zip(todo, parts):
+            t[i].passed[t[i].exact_rows, t[i].exact_cols] = out.passed[idx]
+    return [(t.passed, {"traced_fraction": t.traced / t.passed.size,
+                        "unsure_cells": int(t.n_unsure)}) for t in tiles]
 
 
 def field_transmission(lens, film_distance_mm: float, film, plane_z_mm: float, pupil_xy_mm,

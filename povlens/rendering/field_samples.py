@@ -26,12 +26,12 @@ import numpy as np
 
 from povlens.errors import PovlensError
 from povlens.plan.schema import Plan
-from povlens.pov.field_mesh import (build_field_mesh, combine_meshes, deinterleave, mesh2_text,
-                                    pass_models, pass_rows, placement_text)
+from povlens.pov.field_mesh import (build_field_meshes, combine_meshes, deinterleave,
+                                    mesh2_text, pass_models, pass_rows, placement_text)
 from povlens.pupil.field import (PupilMap, concentric_disc_mm, field_sample_points, field_weight,
                                  tile_points, trace_field)
 from povlens.pupil.field_domain import FieldDomain, disc_domain
-from povlens.pupil.field_mask import field_transmission, pass_mask
+from povlens.pupil.field_mask import field_transmission, pass_masks
 from povlens.pupil.rays import ScenePlacement
 from povlens.rendering.vignetting import mesh_illumination_map
 from povlens.util.files import write_bytes
@@ -156,27 +156,28 @@ def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path)
     lens = sample_lens(plan, lens, k)
     placement = placement_of(plan)
     pixel_angle = film.pixel_pitch_mm / abs(plan.lens.efl_mm)
-    origin = None           # the tiles share the first one's (the matrix's translation)
+    tiles = field_tiles(plan, k)
+    domain = field_domain_of(plan)
+    qs = np.array([t.pupil.q for t in tiles])
+
+    def field(x, y, tile):          # the rays of image positions of the tiles ``tile``
+        q = qs[tile]
+        return trace_field(lens, fd, film, table.plane_z_mm,
+                           lambda f: domain.points_mm(f, q), x, y)
+    models = [t.model for t in tiles]
+    meshes = build_field_meshes(field, placement, models, fm.grid, fm.eps, pixel_angle)
+    masks = pass_masks([m.node_margins() + t.model.pixel_positions()
+                        for m, t in zip(meshes, tiles)], field)
     passed = np.zeros((film.height_px, film.width_px), bool)
     masked = lens.aperture_shape is not None and lens.aperture_shape.mask is not None
     transmission = np.zeros(passed.shape, np.float32) if masked else None
-    meshes = []
-    for tile in field_tiles(plan, k):
-        model = tile.model
-
-        def field(x, y, pupil=tile.pupil):
-            return trace_field(lens, fd, film, table.plane_z_mm, pupil, x, y)
-        mesh = build_field_mesh(field, placement, model, fm.grid, fm.eps, pixel_angle, origin)
-        origin = mesh.matrix[3]
-        xs, ys, margins = mesh.node_margins()
-        px, py = model.pixel_positions()
-        ok, _ = pass_mask(xs, ys, margins, px, py, field)
-        rows, cols = model.rows(), model.columns()
+    for tile, (ok, _) in zip(tiles, masks):
+        rows, cols = tile.model.rows(), tile.model.columns()
         passed[np.ix_(rows, cols)] = ok
         if masked:      # grey mask stop: each passing pixel's transmission
+            px, py = tile.model.pixel_positions()
             transmission[np.ix_(rows, cols)] = field_transmission(
                 lens, fd, film, table.plane_z_mm, tile.pupil, px, py, ok)
-        meshes.append(mesh)
     r0, r1 = plan.rows_of_sample(k)
     passed[:r0] = False
     passed[r1:] = False

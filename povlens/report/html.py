@@ -541,10 +541,12 @@ class _Folder:
                 f"{inp.height} px</p>")
         fm = self.plan.field_mesh
         if fm is not None:
+            tiles = (f"; {fm.interleave} x {fm.interleave} interleaved tiles per lens sample"
+                     if fm.interleave > 1 else "")
             head += (f"<p>ray meshes: {fm.grid[0]} x {fm.grid[1]} faces (POV-Ray mesh_camera "
                      f"distribution 3), rays within {fm.max_ray_error_px:.3f} px of the exact "
                      f"ones (measured over {fm.pupil_points} pupil points; limit "
-                     f"{fm.limit_px:g} px)</p>")
+                     f"{fm.limit_px:g} px){tiles}</p>")
         head += _colour_line(self.plan.dispersion, bool(inp.dispersion))
         parts = [self.lens_section(), self.pupil_section()]
         renders, pinhole = self.renders_section()
