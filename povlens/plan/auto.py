@@ -167,7 +167,7 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     d = decide(near_z_mm=near_z, far_z_mm=far_z, model=model, model_error=err,
                pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.tolerance_px,
                vignetting=opts.vignetting, image_error=image_error,
-               catseye=pupil_cut(profile), field_meshes=opts.ray_mesh == "field",
+               catseye=pupil_cut(profile),
                aperture_shape=(describe(lens.aperture_shape) if lens.aperture_shape is not None
                                else None),
                shift_tilt_cos=shift_tilt_cos(film.shift_mm, model.image_distance_mm))

@@ -74,17 +74,13 @@ __all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "shape_error_px", "vignetting_rmse",
            "pixel_blur_mm",
            "SAMPLE_SPACING_PX", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "SAMPLE_RULE",
            "VIGNETTING_TOLERANCE", "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE",
-           "CATSEYE_SAMPLES", "CATSEYE_RADII", "FIELD_MESH_SAMPLE_FACTOR"]
+           "CATSEYE_SAMPLES", "CATSEYE_RADII"]
 
 #: Largest spacing in pixels between the film copies of one blurred point (target noise).
 SAMPLE_SPACING_PX = 1.0
 #: Samples per squared pixel of blur diameter: (pi/4) / spacing^2.
 SAMPLE_K = (math.pi / 4) / SAMPLE_SPACING_PX ** 2
 MIN_SAMPLES, MAX_SAMPLES = 8, 256
-#: Field meshes need about this many times the samples of per-pixel meshes for the same
-#: error (every pixel shares a sample's pupil point): 2.5x measured at 160x120 and at
-#: 640x480 (docs/decisions/exact-lens-distribution3.md, "The sample rule").
-FIELD_MESH_SAMPLE_FACTOR = 2
 SAMPLE_RULE = (f"N = ceil({SAMPLE_K:.3g} b^2) rounded to the nearest power of two, "
                f"{MIN_SAMPLES}..{MAX_SAMPLES}")
 #: Share of the error budget that what the vignetting map cannot carry (the cat's
@@ -301,7 +297,7 @@ def _focal_blur_checks(check, tol: float, dist: float, size_err: float, shape_er
 def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
            pixel_pitch_mm: float, tolerance_px: float = 0.5, vignetting: bool = True,
            image_error: dict | None = None, catseye: dict | None = None,
-           field_meshes: bool = False, aperture_shape: str | None = None,
+           aperture_shape: str | None = None,
            shift_tilt_cos: float = 1.0) -> Decision:
     """Choose the render method and its lens samples (pure; see the module docstring).
 
@@ -322,9 +318,6 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     catseye : :func:`pupil_cut` of the lens's pupil, for the pixel measure when the
         image gives no ``catseye_rmse``.  Without either, a relative illumination
         below ``1 - VIGNETTING_TOLERANCE`` anywhere is a deviation.
-    field_meshes : a mesh render would use field meshes (one pupil point per sample
-        for the whole frame): its sample count is :data:`FIELD_MESH_SAMPLE_FACTOR`
-        times the rule's, capped at :data:`MAX_SAMPLES`.
     aperture_shape : a few words on a shaped stop (iris, mask;
         :func:`povlens.plan.aperture.describe`), which focal_blur cannot draw: with a
         visible blur the render is mesh.
@@ -378,10 +371,7 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     b_max = max(blur["max_px"], max_real)
     samples = samples_for_blur(b_max)
     numbers["max_blur_px"] = b_max
-    factor = FIELD_MESH_SAMPLE_FACTOR if field_meshes else 1
-    mesh_samples = min(MAX_SAMPLES, factor * samples)
-    field_text = (f", times {factor} for field meshes (every pixel shares a sample's pupil "
-                  f"point)" if factor > 1 else "")
+    mesh_samples = samples
     fb = _focal_blur_checks(check, tol, dist, size_err, shape_err, b_max, shift_tilt_cos, numbers)
     reasons.append("focal-blur: " + vig_text)
     _aperture_shape_check(aperture_shape, reasons, fb)
@@ -397,8 +387,7 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
             f"but what the map cannot carry (the cat's eye) uses {floor_share:.2f} of it "
             f"(>= {VIGNETTING_FLOOR_SHARE:g}: no focal_blur sample count goes below that "
             f"error), and the {b_max:.3g} px blur needs only the minimum {MIN_SAMPLES} lens "
-            f"samples, which cost about what the adaptive focal blur does, without the floor"
-            + field_text)
+            f"samples, which cost about what the adaptive focal blur does, without the floor")
         return Decision("mesh", mesh_samples, reasons, numbers)
     if fb_ok:
         fbs = FOCAL_BLUR_ADAPTIVE
@@ -416,7 +405,7 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
            f"visible" if aperture_shape and all(fb[:-1]) and not catseye_bad else
            "the real lens deviates from the equivalent thin lens beyond the budget")
     reasons.append(f"-> mesh: {why}; {mesh_samples} samples for a {b_max:.3g} px blur "
-                   f"({SAMPLE_RULE}{field_text})")
+                   f"({SAMPLE_RULE})")
     return Decision("mesh", mesh_samples, reasons, numbers)
 
 

@@ -263,10 +263,9 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, l
     """The fisheye distorts far beyond the budget, and dgauss.50mm on a 10 mm film
     with a 0.2 px budget does too: the lens alone rules out the views, so povlens
     render starts lens samples 0..7 while the depth probe runs, and the samples the
-    decision adds follow in the same pipeline (dgauss focused at 1.5 m: ~5 pixels of
-    blur, 16 samples by the rule, twice that for field meshes).  The result equals a
-    fixed mesh render of the decided sample count."""
-    from povlens.plan.decision import FIELD_MESH_SAMPLE_FACTOR, MIN_SAMPLES
+    decision adds follow in the same pipeline (the rule's count for the largest blur).
+    The result equals a fixed mesh render of the decided sample count."""
+    from povlens.plan.decision import samples_for_blur
     from povlens.rendering.samples import convert_and_render
     auto = tmp_path / "auto"
     kw = dict(lens=lens, focus=focus, film_diagonal_mm=film_mm, batch_size=None)
@@ -276,7 +275,7 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, l
     assert any("while the depth probe ran" in r for r in plan.decision.reasons)
     assert plan.decision.reasons[-1].startswith("-> mesh")      # the conclusion stays last
     n = plan.inputs.samples
-    assert (n > MIN_SAMPLES * FIELD_MESH_SAMPLE_FACTOR) == (focus == 1.5)
+    assert n == samples_for_blur(plan.decision.numbers["max_blur_px"])
     early = json.loads((auto / "samples" / "early.timing.json").read_text())
     assert early["samples"] == n                     # all of them, in the one pipeline
     assert not (auto / "samples" / "render.timing.json").exists()
