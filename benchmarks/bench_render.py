@@ -239,7 +239,7 @@ def equal_time(scene: Path, lens: str, width: int, height: int, jobs: int, work:
 # time to FLIP levels
 
 FOCUS = 4.0
-REFERENCE_SAMPLES = {640: 256, 1920: 128}
+REFERENCE_SAMPLES = {640: 256, 1920: 64}
 REFERENCE_SEED = 7
 SWEEPS = {"focal-blur": (4, 8, 16, 32, 64, 128), "mesh": (4, 8, 16, 32, 64, 128)}
 PIXEL_SWEEP = {640: (2, 4, 8, 16), 1920: (2, 4, 8)}
