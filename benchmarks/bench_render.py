@@ -259,9 +259,11 @@ def povlens_render(out: Path, scene: Path, lens: str, width: int, height: int, *
     return t
 
 
-def reference_image(refdir: Path, scene: Path, lens: str, width: int, height: int) -> Path:
-    """The converged per-pixel reference (rendered once, kept in ``refdir``)."""
-    n = REFERENCE_SAMPLES.get(width, 128)
+def reference_image(refdir: Path, scene: Path, lens: str, width: int, height: int,
+                    samples: int | None = None) -> Path:
+    """The converged per-pixel reference (rendered once, kept in ``refdir``): ``samples``
+    per-pixel samples (default :data:`REFERENCE_SAMPLES` for the width)."""
+    n = samples or REFERENCE_SAMPLES.get(width, 128)
     out = refdir / f"{scene.stem}-{lens}-{width}x{height}-pixel{n}-seed{REFERENCE_SEED}"
     if not (out / "image.exr").exists():
         print(f"  rendering the reference ({n} per-pixel samples) into {out} ...", flush=True)

@@ -12,8 +12,8 @@ pair this measures, one run each:
   converged reference by the tolerance (+-x, +-y, linear interpolation, a 2-pixel border
   left out) -- what ``--tolerance`` pixels mean to the eye on this scene;
 * the default exact render (``--method mesh``: interleaved field meshes) at N = 2 .. 256
-  against that reference (the per-pixel meshes with 256 samples, another seed,
-  ``benchmarks/bench_render.py``'s references): N*, the samples at which its FLIP
+  against that reference (per-pixel meshes, 256 samples or ``--reference-samples``,
+  another seed, ``benchmarks/bench_render.py``'s references): N*, the samples at which its FLIP
   reaches the budget (log-log interpolation);
 
 and K = N* / b^2 per pair.  The rule's K is chosen from these (the largest, so every
@@ -68,6 +68,8 @@ def main(argv=None) -> int:
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--tolerance", type=float, default=0.5)
     ap.add_argument("--references", type=Path, default=ROOT / "benchmarks" / "references")
+    ap.add_argument("--reference-samples", type=int, default=None,
+                    help="per-pixel samples of the references (default bench_render's)")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     work = Path(tempfile.mkdtemp(prefix="povlens-fit-rule-"))
@@ -76,7 +78,8 @@ def main(argv=None) -> int:
         for pair in args.pairs.split(","):
             name, lens = pair.split(":")
             scene = SCENES / f"{name}.pov"
-            ref = read_image(reference_image(args.references, scene, lens, w, h))[..., :3]
+            ref = read_image(reference_image(args.references, scene, lens, w, h,
+                                             args.reference_samples))[..., :3]
             ref = ref.astype(np.float64)
             b = largest_blur_px(scene, lens, w, h)
             budget = shift_flip(ref, args.tolerance)
