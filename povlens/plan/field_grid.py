@@ -102,7 +102,7 @@ SHRINK_BELOW = 0.6
 PASS_FACE_BUDGET = 6000
 #: Pixels a tile keeps at least: each tile costs povlens a mesh of its own (5-15 ms),
 #: which a small tile's share of POV-Ray's work would not pay for.
-MIN_TILE_PIXELS = 4096
+MIN_TILE_PIXELS = 2048
 #: The largest interleave tried.
 MAX_INTERLEAVE = 4
 

@@ -30,10 +30,15 @@ def test_a_mesh_plan_records_its_certified_field_meshes_and_reads_back():
     assert 0 < fm.max_ray_error_px <= LIMIT_PX == fm.limit_px
     assert fm.pupil_points == 17 and fm.pixels_checked > 1000
     assert fm.grid[0] >= 4 and fm.eps in (0.01, 1.0)
-    # the render is one pixel larger each way; the composite drops row 0 and the last column
+    # the m x m tiles are rendered in a row, each ceil(W / m) x ceil(H / m), one pixel larger
+    # each way for FS#261; the composite drops row 0 and the last column
+    m = fm.interleave
+    faces = 2 * fm.grid[0] * fm.grid[1]
+    assert m == 3 and m * m * faces <= 6000 and 160 * 120 >= m * m * 2048
     pv = plan.povray
     assert (pv.render_width, pv.render_height, pv.drop_top_rows, pv.drop_right_columns) == (
-        161, 121, 1, 1)
+        m * m * 54 + 1, 41, 1, 1)
+    assert fm.domain is not None and 0.8 < fm.domain["efficiency"] <= 1.0
     again = Plan.from_dict(plan.to_dict())
     assert again.field_mesh == fm and again.povray == pv
     assert again.to_dict() == plan.to_dict()
