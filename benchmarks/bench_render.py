@@ -246,6 +246,14 @@ PIXEL_SWEEP = {640: (2, 4, 8, 16), 1920: (2, 4, 8)}
 FIXED_LEVELS = (0.05, 0.04, 0.03, 0.02)
 
 
+def write_csv(path: Path, rows: list[dict]) -> None:
+    keys = sorted({k for r in rows for k in r})
+    with open(path, "w", newline="") as f:
+        wr = csv.DictWriter(f, fieldnames=keys)
+        wr.writeheader()
+        wr.writerows(rows)
+
+
 def povlens_render(out: Path, scene: Path, lens: str, width: int, height: int, *extra) -> float:
     """Wall time (s) of one ``povlens render`` (conversion, render, composite)."""
     cmd = [sys.executable, "-m", "povlens", "render", str(scene), "--lens", lens, "--focus",
@@ -373,11 +381,7 @@ def main_flip(args) -> int:
               f"{'met' if s['goal_floor'] else 'NOT met'}; "
               f"{'met' if s['goal_06'] else 'NOT met'}")
     if args.csv:
-        keys = sorted({k for r in rows for k in r})
-        with open(args.csv, "w", newline="") as f:
-            wr = csv.DictWriter(f, fieldnames=keys)
-            wr.writeheader()
-            wr.writerows(rows)
+        write_csv(args.csv, rows)
     return 0 if all(s["goal_floor"] and s["goal_06"] for s in summaries) else 1
 
 
@@ -413,11 +417,7 @@ def main(argv=None):
         print(f"  {r['scene']:10s} {r['size']:10s} N={r['n']:3d}: {r['ratio_render']:.2f}x; "
               f"{r['ratio_with_convert']:.2f}x; peak {r['peak_mb']:.0f} MB")
     if args.csv:
-        keys = sorted({k for r in rows for k in r})
-        with open(args.csv, "w", newline="") as f:
-            wr = csv.DictWriter(f, fieldnames=keys)
-            wr.writeheader()
-            wr.writerows(rows)
+        write_csv(args.csv, rows)
     return 0
 
 

@@ -25,6 +25,7 @@ from povlens.plan.schema import read_plan
 from povlens.util.images import read_image
 
 from conftest import ROOT
+from test_aperture_render import _outline_corner_angles
 
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray is not installed")
 PAPER = ROOT / "scenes" / "paper.pov"
@@ -82,24 +83,6 @@ sphere { <0, 0, 30>, 0.14 pigment { rgb 1 } finish { emission 4 diffuse 0 ambien
 """
 
 
-def _corner_angles(img: np.ndarray, n_angles: int = 180) -> np.ndarray:
-    """Angles (deg) of the maxima of the highlight's outline radius (the radius where the
-    Gaussian-smoothed image falls below a tenth of its peak), smoothed over angle."""
-    from scipy import ndimage
-    im = ndimage.gaussian_filter(img, 1.0)
-    cy, cx = ndimage.center_of_mass(im)
-    theta = np.radians(np.arange(n_angles) * 360.0 / n_angles)
-    r = np.arange(0.0, min(img.shape) / 2, 0.25)
-    profile = ndimage.map_coordinates(im, [cy - np.outer(np.sin(theta), r),
-                                           cx + np.outer(np.cos(theta), r)], order=1)
-    edge = r[np.argmax(profile <= 0.1 * im.max(), axis=1)]
-    k = np.exp(-0.5 * (np.arange(-8, 9) / 2.5) ** 2)
-    smooth = np.convolve(np.concatenate([edge[-8:], edge, edge[:8]]), k / k.sum(), "same")[8:-8]
-    peak = ((smooth > np.roll(smooth, 1)) & (smooth >= np.roll(smooth, -1))
-            & (smooth > np.median(smooth)))
-    return np.nonzero(peak)[0] * 360.0 / n_angles
-
-
 @needs_povray
 def test_far_highlight_through_an_iris_is_a_filled_hexagon_at_auto_samples(tmp_path):
     """A small bright sphere far behind the focus, 6 blades at 10 deg: ``--method auto``
@@ -122,7 +105,7 @@ def test_far_highlight_through_an_iris_is_a_filled_hexagon_at_auto_samples(tmp_p
           f"lit {lit.mean():.3f} inside")
     assert disc.sum() > 200                          # far out of focus: a wide blur
     assert lit.mean() > 0.9                          # filled, not separate dots
-    corners = _corner_angles(img)
+    corners = _outline_corner_angles(img)
     assert len(corners) == 6, corners
     want = (100.0 + 60.0 * np.arange(6)) % 360
     err = np.abs((corners[:, None] - want[None, :] + 180) % 360 - 180).min(axis=1)
