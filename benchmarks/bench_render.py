@@ -298,7 +298,7 @@ def time_to_level(points: list[tuple[float, float]], level: float) -> float | No
 
 
 def flip_sweep(scene: Path, lens: str, width: int, height: int, work: Path,
-               refdir: Path) -> tuple[list[dict], dict]:
+               refdir: Path, methods=None) -> tuple[list[dict], dict | None]:
     """Every method's renders against the reference, and the time-to-level summary."""
     from povlens.report.compare import flip_error
     ref_path = reference_image(refdir, scene, lens, width, height)
@@ -313,6 +313,8 @@ def flip_sweep(scene: Path, lens: str, width: int, height: int, work: Path,
     runs += [("pixel", n, ("--method", "mesh", "--ray-mesh", "pixel", "--samples", n))
              for n in PIXEL_SWEEP.get(width, (2, 4))]
     runs += [("auto", None, ())]
+    if methods:
+        runs = [r for r in runs if r[0] in methods]
     for method, n, extra in runs:
         out = work / f"{scene.stem}-{width}-{method}-{n}"
         t = povlens_render(out, scene, lens, width, height, *extra)
@@ -329,6 +331,8 @@ def flip_sweep(scene: Path, lens: str, width: int, height: int, work: Path,
               f"FLIP {flip:.4f}  mean/ref {row['mean_ratio']:.4f}"
               + (f"  (chose {row['auto_choice']})" if method == "auto" else ""), flush=True)
         shutil.rmtree(out, ignore_errors=True)
+    if methods:                         # a partial sweep: no levels
+        return rows, None
     curves = {m: [(r["time_s"], r["flip"]) for r in rows if r["method"] == m]
               for m in ("focal-blur", "mesh", "pixel")}
     fb = [r for r in rows if r["method"] == "focal-blur"]
@@ -369,11 +373,15 @@ def main_flip(args) -> int:
     try:
         for name in args.scenes.split(","):
             for w, h in sizes:
-                r, s = flip_sweep(SCENES / name, args.lens, w, h, work, args.references)
+                r, s = flip_sweep(SCENES / name, args.lens, w, h, work, args.references,
+                                  args.methods.split(",") if args.methods else None)
                 rows += r
-                summaries.append(s)
+                if s is not None:
+                    summaries.append(s)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    if not summaries:
+        return 0
     print("\nsummary: goals (mesh to focal_blur's floor within focal_blur's time; to 0.6 x "
           "floor within 2 x focal_blur-64)")
     for s in summaries:
@@ -391,6 +399,8 @@ def main(argv=None):
     ap.add_argument("--lens", default="dgauss.50mm")
     ap.add_argument("--sizes", default="640x480,1920x1080")
     ap.add_argument("--references", type=Path, default=ROOT / "benchmarks" / "references")
+    ap.add_argument("--methods", help="only these (pinhole,focal-blur,mesh,pixel,auto): no "
+                    "time-to-level table")
     ap.add_argument("--ratios", action="store_true",
                     help="the ratios at equal N against focal_blur (the earlier benchmark)")
     ap.add_argument("--samples", default="16,64")

@@ -4,7 +4,7 @@
         [--tolerance 0.5] [--references DIR]
 
 The rule (:func:`povlens.plan.decision.samples_for_blur`) gives a mesh render
-N = K b^2 lens samples for the scene's largest blur of b pixels.  For each scene / lens
+N = K b lens samples (before issue 22: 0.785 b^2) for the scene's largest blur of b pixels.  For each scene / lens
 pair this measures, one run each:
 
 * b: the largest blur ``povlens plan`` finds (its depth probe and the thin-lens model);
@@ -16,8 +16,9 @@ pair this measures, one run each:
   another seed, ``benchmarks/bench_render.py``'s references): N*, the samples at which its FLIP
   reaches the budget (log-log interpolation);
 
-and K = N* / b^2 per pair.  The rule's K is chosen from these (the largest, so every
-pair meets its budget); the result goes to ``benchmarks/results/sample_rule.txt``.
+and N* / b and N* / b^2 per pair.  The rule's K is chosen from these (with the rounding
+to a power of two, so every pair meets its budget); the last run is in
+``benchmarks/results/sample_rule_640x480.txt``.
 """
 
 from __future__ import annotations
@@ -95,18 +96,18 @@ def main(argv=None) -> int:
                 if f <= budget:
                     break
             n_star = time_to_level(points, budget)      # (N, FLIP) interpolated like times
-            k = None if n_star is None else n_star / (b * b)
+            k = None if n_star is None else n_star / b
             ks.append(k)
             print(f"{name} {lens} {w}x{h}: largest blur {b:.2f} px, budget (FLIP of a "
                   f"{args.tolerance:g} px move) {budget:.4f}, N* = "
-                  f"{'-' if n_star is None else f'{n_star:.1f}'}, K = N*/b^2 = "
-                  f"{'-' if k is None else f'{k:.3f}'}", flush=True)
+                  f"{'-' if n_star is None else f'{n_star:.1f}'}, N*/b = "
+                  f"{'-' if k is None else f'{k:.3f}'}, N*/b^2 = "
+                  f"{'-' if k is None else f'{k / b:.3f}'}", flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     found = [k for k in ks if k is not None]
     if found:
-        print(f"K: largest {max(found):.3f}, median {float(np.median(found)):.3f} "
-              f"(the rule before: 0.785, times 2 for field meshes)")
+        print(f"N*/b: largest {max(found):.3f}, median {float(np.median(found)):.3f}")
     return 0
 
 

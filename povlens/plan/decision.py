@@ -42,14 +42,16 @@ relative illumination below ``1 - VIGNETTING_TOLERANCE`` counts as a deviation
 deviation.  Numbers and the derivation: docs/decisions/planning.md ("Vignetting
 applied as a map").
 
-**Samples.**  With N stratified lens samples, the N copies of a point blurred
-into a disc of diameter b pixels lie about ``b sqrt(pi/4) / sqrt(N)`` pixels
-apart.  The target noise is that these copies are at most
-:data:`SAMPLE_SPACING_PX` (1 pixel) apart, so they blend instead of showing as
-separate copies / structured noise: ``N = ceil(K b_max^2)`` with ``K = (pi/4) /
-SAMPLE_SPACING_PX^2`` and b_max the largest blur in pixels (real or model) over
-the depth range, rounded to the nearest power of two (the Sobol lens samples are
-balanced in blocks of 2^m) and clamped to 8..256 (:func:`samples_for_blur`).
+**Samples.**  ``N = ceil(K b_max)`` with K = :data:`SAMPLES_PER_BLUR_PX` (2) and
+b_max the largest blur diameter in pixels (real or model) over the depth range,
+rounded to the nearest power of two (the Sobol lens samples are balanced in blocks of
+2^m) and clamped to 8..256 (:func:`samples_for_blur`).  Fitted to what the eye sees
+(``benchmarks/fit_sample_rule.py``, docs/decisions/exact-images.md): on 2 scenes x 3
+lenses at 640x480 and dgauss.50mm at 1920x1080 the default mesh render reaches the
+budget -- the FLIP of moving a converged render by the 0.5 px tolerance -- at N* =
+0.5-1.6 b (a law in b fits these seven; the earlier ``0.785 b^2``, copies of a
+blurred point 1 px apart, gave 4-30x the samples needed), and K = 2 with the rounding
+meets every one.
 Pinhole renders use 1 sample.  A chosen focal_blur uses POV-Ray's adaptive
 sampling instead (:data:`FOCAL_BLUR_ADAPTIVE`), which needs no depth-dependent
 count, so ``povlens render`` can start it while the probe runs
@@ -72,16 +74,15 @@ __all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "shape_error_px", "vignetting_rmse",
            "probe_image_error", "film_radius_map_mm", "blur_range_px", "model_depths",
            "samples_for_blur", "pupil_cut", "shift_tilt_cos", "catseye_px", "catseye_rmse",
            "pixel_blur_mm",
-           "SAMPLE_SPACING_PX", "SAMPLE_K", "MIN_SAMPLES", "MAX_SAMPLES", "SAMPLE_RULE",
+           "SAMPLES_PER_BLUR_PX", "MIN_SAMPLES", "MAX_SAMPLES", "SAMPLE_RULE",
            "VIGNETTING_TOLERANCE", "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE",
            "CATSEYE_SAMPLES", "CATSEYE_RADII"]
 
-#: Largest spacing in pixels between the film copies of one blurred point (target noise).
-SAMPLE_SPACING_PX = 1.0
-#: Samples per squared pixel of blur diameter: (pi/4) / spacing^2.
-SAMPLE_K = (math.pi / 4) / SAMPLE_SPACING_PX ** 2
+#: Lens samples per pixel of the largest blur diameter: the least that reaches the FLIP
+#: of a 0.5 px move on every measured scene and lens (docs/decisions/exact-images.md).
+SAMPLES_PER_BLUR_PX = 2.0
 MIN_SAMPLES, MAX_SAMPLES = 8, 256
-SAMPLE_RULE = (f"N = ceil({SAMPLE_K:.3g} b^2) rounded to the nearest power of two, "
+SAMPLE_RULE = (f"N = ceil({SAMPLES_PER_BLUR_PX:g} b) rounded to the nearest power of two, "
                f"{MIN_SAMPLES}..{MAX_SAMPLES}")
 #: Share of the error budget that what the vignetting map cannot carry (the cat's
 #: eye, :func:`catseye_rmse`) may take before :func:`decide` prefers a minimum mesh
@@ -110,9 +111,8 @@ STRONG_VIGNETTING = 0.5
 def samples_for_blur(blur_px: float, n_min: int = MIN_SAMPLES, n_max: int = MAX_SAMPLES) -> int:
     """Lens samples for a largest blur of ``blur_px`` pixels.
 
-    ``ceil(SAMPLE_K b^2)`` (copies of a blurred point at most
-    :data:`SAMPLE_SPACING_PX` apart), rounded to the nearest power of two (in
-    log2) and clamped to ``[n_min, n_max]``.  Powers of two because the lens
+    ``ceil(SAMPLES_PER_BLUR_PX b)`` (fitted to FLIP: module docstring), rounded to
+    the nearest power of two (in log2) and clamped to ``[n_min, n_max]``.  Powers of two because the lens
     samples are a scrambled Sobol sequence (:mod:`povlens.pupil.rays`), whose
     points are balanced only in blocks of 2^m: a count between two powers
     stratifies no better than the lower power.
@@ -127,7 +127,7 @@ def samples_for_blur(blur_px: float, n_min: int = MIN_SAMPLES, n_max: int = MAX_
     int
     """
     b = float(blur_px)
-    k = SAMPLE_K * b * b if abs(b) < 1e9 else math.inf
+    k = SAMPLES_PER_BLUR_PX * abs(b) if abs(b) < 1e9 else math.inf
     if not math.isfinite(k) or k > n_max:
         return int(max(n_min, n_max))
     n = 2 ** round(math.log2(max(1, math.ceil(k))))
@@ -264,7 +264,7 @@ def _numbers(near_z_mm, far_z_mm, model, e: dict, blur: dict, tol: float, vignet
         "vignetting": "applied as a map" if vignetting else "not wanted",
         **({f"image_{k}": float(v) for k, v in image_error.items()} if image_error else {}),
         "model_depths_z_mm": list(e.get("object_z_mm", [])),
-        "sample_k": SAMPLE_K,
+        "samples_per_blur_px": SAMPLES_PER_BLUR_PX,
     }
 
 

@@ -23,10 +23,10 @@ pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray 
 
 def opts(tmp_path, name, **kw):
     # Focus 1.5 m in paper.pov (everything is 4 m or farther): the far rows at the top
-    # are blurred more than the floor rows at the bottom.  A 12 mm film makes the blur
-    # several pixels at 48 x 36 (3.7..4.3 px: 8 and 16 samples).
+    # are blurred more than the floor rows at the bottom.  An 8.5 mm film makes the blur
+    # several pixels at 48 x 36 (5.2..6.1 px: 8 and 16 samples).
     base = dict(scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=1.5,
-                film_diagonal_mm=12.0, outdir=str(tmp_path / name), width=48, height=36,
+                film_diagonal_mm=8.5, outdir=str(tmp_path / name), width=48, height=36,
                 method="mesh", samples=32, adaptive=True)
     base.update(kw)
     return ConvertOptions(**base)

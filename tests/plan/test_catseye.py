@@ -106,7 +106,7 @@ def test_a_strongly_defocused_scene_with_a_strong_catseye_is_a_mesh_render(tmp_p
                                            outdir=str(tmp_path / lens), width=640,
                                            height=480, method="auto")).decision
     d = got["dgauss.50mm"]
-    assert d.method == "mesh" and d.samples >= 64, d.reasons
+    assert d.method == "mesh" and d.samples >= 32, d.reasons       # 15.9 px of blur
     n = d.numbers
     assert n["image_catseye_rmse"] >= n["image_shift_rmse"]
     assert any("cat's-eye shape" in r and r.endswith("a deviation") for r in d.reasons)
