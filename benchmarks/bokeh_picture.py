@@ -6,8 +6,9 @@ the per-pixel one at the same sample count.
 The issue's setting: a small bright sphere far away (emissive, radius 0.14 m at 30 m),
 focus 0.3 m, f/2.8, 6 blades turned 10 deg, 256x192, dgauss.50mm.  Renders ``--method auto``
 (which picks exact lens samples: focal_blur cannot draw an iris) and ``--method mesh
---ray-mesh pixel`` with the samples auto chose, and writes the 128x128 around the
-highlight of each side by side (sRGB), with their times and FLIP against each other.
+--ray-mesh pixel`` with the samples auto chose, and writes the 64x64 around the
+highlight of each side by side, enlarged 3x (sRGB), with their times and FLIP against
+each other.
 """
 
 from __future__ import annotations
@@ -62,9 +63,10 @@ def main(argv=None) -> int:
         p = read_image(Path(tmp) / "pixel" / "image.exr")[..., :3]
     lum = p.mean(axis=2)
     cy, cx = (int(v) for v in np.argwhere(lum > 0.5 * lum.max()).mean(axis=0))
-    cy, cx = min(max(cy, 64), 192 - 64), min(max(cx, 64), 256 - 64)
-    crop = (slice(cy - 64, cy + 64), slice(cx - 64, cx + 64))
-    strip = np.concatenate([a[crop], np.zeros((128, 4, 3), np.float32), p[crop]], axis=1)
+    cy, cx = min(max(cy, 32), 192 - 32), min(max(cx, 32), 256 - 32)
+    crop = (slice(cy - 32, cy + 32), slice(cx - 32, cx + 32))
+    strip = np.concatenate([a[crop], np.zeros((64, 2, 3), np.float32), p[crop]], axis=1)
+    strip = np.repeat(np.repeat(strip, 3, axis=0), 3, axis=1)     # 3x, pixels as squares
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_png_srgb(args.out, np.clip(strip, 0, None))
     fm = plan.field_mesh
