@@ -371,7 +371,6 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
     b_max = max(blur["max_px"], max_real)
     samples = samples_for_blur(b_max)
     numbers["max_blur_px"] = b_max
-    mesh_samples = samples
     fb = _focal_blur_checks(check, tol, dist, size_err, shape_err, b_max, shift_tilt_cos, numbers)
     reasons.append("focal-blur: " + vig_text)
     _aperture_shape_check(aperture_shape, reasons, fb)
@@ -388,7 +387,7 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
             f"(>= {VIGNETTING_FLOOR_SHARE:g}: no focal_blur sample count goes below that "
             f"error), and the {b_max:.3g} px blur needs only the minimum {MIN_SAMPLES} lens "
             f"samples, which cost about what the adaptive focal blur does, without the floor")
-        return Decision("mesh", mesh_samples, reasons, numbers)
+        return Decision("mesh", samples, reasons, numbers)
     if fb_ok:
         fbs = FOCAL_BLUR_ADAPTIVE
         numbers["blur_rule_samples"] = samples
@@ -404,9 +403,9 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
            f"focal_blur cannot draw the aperture shape ({aperture_shape}) and the blur is "
            f"visible" if aperture_shape and all(fb[:-1]) and not catseye_bad else
            "the real lens deviates from the equivalent thin lens beyond the budget")
-    reasons.append(f"-> mesh: {why}; {mesh_samples} samples for a {b_max:.3g} px blur "
+    reasons.append(f"-> mesh: {why}; {samples} samples for a {b_max:.3g} px blur "
                    f"({SAMPLE_RULE})")
-    return Decision("mesh", mesh_samples, reasons, numbers)
+    return Decision("mesh", samples, reasons, numbers)
 
 
 def shift_tilt_cos(shift_mm, image_distance_mm: float) -> float:

@@ -6,9 +6,10 @@ across the field) and longitudinal colour (paraxial focus shift, mm), measured b
 :func:`povlens.lens.dispersion.chromatic_aberration`.  Mesh plans render the colour
 (``inputs.dispersion`` True): each lens sample is traced at its own wavelength
 (:mod:`povlens.rendering.spectral`), and what the samples' pupil points are drawn
-from is enlarged to hold every wavelength's pass region: the field meshes' pupil
-disc, or for per-pixel meshes the exit-pupil table's polygons (``pupil_dilation``,
-one factor per knot: :mod:`povlens.pupil.band_table`).  Other methods render none,
+from is enlarged to hold every wavelength's pass region: the exit-pupil table's
+polygons (``pupil_dilation``, one factor per knot: :mod:`povlens.pupil.band_table`),
+which per-pixel meshes sample and the field meshes' ellipses hold
+(:mod:`povlens.pupil.field_domain`).  Other methods render none,
 and a note says so.
 """
 
@@ -17,36 +18,17 @@ from __future__ import annotations
 import dataclasses
 
 from povlens.lens.dispersion import (BAND_NM, chromatic_aberration, disperses,
-                                     has_abbe_numbers, lens_at_wavelength, pass_radius_mm)
+                                     has_abbe_numbers, lens_at_wavelength)
 from povlens.plan.decision import MIN_SAMPLES
 from povlens.pupil.band_table import band_dilation
-from povlens.pupil.field import DISC_MARGIN
 
-__all__ = ["apply_dispersion", "colour_decision", "disc_radius_mm", "COLOUR_MODEL"]
+__all__ = ["apply_dispersion", "colour_decision", "COLOUR_MODEL"]
 
 #: How the samples' wavelengths become RGB (plan.json; povlens.rendering.spectral).
 COLOUR_MODEL = ("Cauchy n = A + B/lambda^2 through n_d and n_F - n_C = (n_d - 1)/V_d; "
                 "wavelengths importance-sampled over the band from the CIE 1931 2-degree "
                 "colour-matching functions in linear sRGB (negative lobes clipped), "
                 "normalised per channel")
-
-
-def disc_radius_mm(lens, film_distance_mm: float, film_radius_mm: float, plane_z_mm: float,
-                   d_line_radius_mm: float) -> float:
-    """A pupil-disc radius (mm, on the table's plane) holding the pass region of every
-    wavelength of :data:`~povlens.lens.dispersion.BAND_NM`: the d line's
-    ``d_line_radius_mm`` or, if larger, the band ends' pass radius
-    (:func:`~povlens.lens.dispersion.pass_radius_mm`) with the disc margin.  The
-    pupils scale monotonically with the index, so the band ends bound the band."""
-    radius = float(d_line_radius_mm)
-    for lam in BAND_NM:
-        lam_lens = lens_at_wavelength(lens, lam)
-        search = 1.5 * radius
-        r = pass_radius_mm(lam_lens, film_distance_mm, film_radius_mm, plane_z_mm, search)
-        if r > search:                   # the search disc was too small: once wider
-            r = pass_radius_mm(lam_lens, film_distance_mm, film_radius_mm, plane_z_mm, 3 * r)
-        radius = max(radius, r * (1.0 + DISC_MARGIN))
-    return radius
 
 
 def apply_dispersion(opts, plan, lens, table) -> None:

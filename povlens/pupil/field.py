@@ -186,14 +186,13 @@ def field_weight(film: Film, plane_z_mm: float, pupil, jitter_px, passed: np.nda
 
     w = passed * cos^4(theta) / z_p^2 * A, theta the angle of the film-side ray (the
     pixel's image position (i + jx, j + jy) toward its pupil point) with the axis and A
-    the area the pupil points are uniform on (a :class:`PupilMap`'s ellipse; or, with a
-    fixed pupil point, ``pupil = (point (2,), area)``).
+    the area the pupil points are uniform on (the :class:`PupilMap`'s ellipse).
 
     Parameters
     ----------
     film : the film.
     plane_z_mm : the sampling plane (mm).
-    pupil : :class:`PupilMap`, or (point (2,) mm, area mm^2).
+    pupil : the tile's :class:`PupilMap`.
     jitter_px : (2,) the sample's sub-pixel offset (x right, y down).
     passed : (h, w) bool, the exact verdict per pixel.
     columns, rows : (w,), (h,) the image columns and rows of the pixels (default all).
@@ -208,10 +207,7 @@ def field_weight(film: Film, plane_z_mm: float, pupil, jitter_px, passed: np.nda
     if not ok.any():
         return w
     f = image_to_film_mm(film, x[ok], y[ok])
-    if callable(pupil):
-        P, area = pupil(f), pupil.area_mm2(f)
-    else:
-        P, area = np.asarray(pupil[0], float)[None, :], float(pupil[1])
+    P, area = pupil(f), pupil.area_mm2(f)
     zp2 = plane_z_mm * plane_z_mm
     c2 = zp2 / (np.einsum("ij,ij->i", P - f, P - f) + zp2)
     w[ok] = (c2 * c2 * area / zp2).astype(np.float32)

@@ -168,9 +168,12 @@ def field_domain(table, degree: int = FIT_DEGREE) -> FieldDomain:
         ``--dispersion``, which holds every wavelength's region).
     degree : degree of the polynomials in s.
     """
-    dom = _fitted_domain(table, degree)
     R = float(table.max_film_radius_mm)
-    ext = _polygon_extents(table, np.linspace(0.0, R, 65)) if R > 0 else []
+    ext = []
+    if R > 0:
+        knots = table.film_radius_mm[table.film_radius_mm <= R]
+        ext = _polygon_extents(table, np.union1d(np.linspace(0.0, R, N_RADII), knots))
+    dom = _fitted_domain(table, ext, degree)
     if not ext:
         return dom
     r = np.array([e[0] for e in ext])
@@ -179,15 +182,14 @@ def field_domain(table, degree: int = FIT_DEGREE) -> FieldDomain:
     return dataclasses.replace(dom, efficiency=float(eff[area >= 0.1 * area.max()].min()))
 
 
-def _fitted_domain(table, degree: int) -> FieldDomain:
-    """The fitted ellipse family, or the bounding disc."""
+def _fitted_domain(table, ext, degree: int) -> FieldDomain:
+    """The ellipse family fitted to the polygons ``ext`` (:func:`_polygon_extents`), or
+    the bounding disc."""
     from povlens.pupil.field import bounding_disc_radius_mm
     R = float(table.max_film_radius_mm)
     rb = bounding_disc_radius_mm(table)
     if not (R > 0 and rb > 0):
         return disc_domain(rb, R if R > 0 else 1.0)
-    knots = table.film_radius_mm[table.film_radius_mm <= R]
-    ext = _polygon_extents(table, np.union1d(np.linspace(0.0, R, N_RADII), knots))
     if len(ext) < degree + 2:
         return disc_domain(rb, R)
     r = np.array([e[0] for e in ext])

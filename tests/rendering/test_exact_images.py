@@ -113,21 +113,17 @@ def test_far_highlight_through_an_iris_is_a_filled_hexagon_at_auto_samples(tmp_p
 
 
 @needs_povray
-def test_interleaved_tiles_turn_ghost_copies_into_noise(tmp_path):
+def test_interleaved_tiles_turn_ghost_copies_into_noise(tmp_path, monkeypatch):
     """Blurred image, few samples: neighbouring pixels of one pass take different lens
     samples, so the error against a converged render is uncorrelated between
     neighbours (noise) -- one tile per pass shares every sample over the frame, and its
     error is a few displaced copies of the scene, correlated over many pixels."""
-    import os
     size = ["--width", 160, "--height", 120, "--focus", 1.5, "--method", "mesh"]
     ref = render(tmp_path / "ref", PAPER, *size, "--samples", 64, "--seed", 5)
     errs = {}
     for m in (1, 3):
-        os.environ["POVLENS_INTERLEAVE"] = str(m)
-        try:
-            img = render(tmp_path / f"m{m}", PAPER, *size, "--samples", 4)
-        finally:
-            del os.environ["POVLENS_INTERLEAVE"]
+        monkeypatch.setenv("POVLENS_INTERLEAVE", str(m))
+        img = render(tmp_path / f"m{m}", PAPER, *size, "--samples", 4)
         assert read_plan(tmp_path / f"m{m}").field_mesh.interleave == m
         e = (img - ref).mean(axis=2)[40:, :]                 # the blurred floor
         e = e - e.mean()
