@@ -20,8 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from povlens.pov.scene_camera import parse_scene_camera
-from povlens.pov.sdl_text import pov_vector
+from povlens.pov.sdl import parse_scene_camera, pov_vector
 from povlens.util.images import read_image
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -162,3 +162,33 @@ def test_tests_use_public_names():
                         for a in node.names
                         if a.name.startswith("_") and not a.name.startswith("__")]
     assert not bad, "\n".join(bad)
+
+
+SDL = "povlens.pov.sdl"
+
+
+def _benchmark_imports() -> list[tuple[str, str, int]]:
+    """(file name, imported module, line) for every absolute import in ``benchmarks/``;
+    ``from a import b`` counts as importing ``a.b`` when that is a module of the package."""
+    found = []
+    for path in PACKAGE.parent.joinpath("benchmarks").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                found += [(path.name, a.name, node.lineno) for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                found.append((path.name, node.module, node.lineno))
+                found += [(path.name, f"{node.module}.{a.name}", node.lineno)
+                          for a in node.names if f"{node.module}.{a.name}" in MODULES]
+    return found
+
+
+def test_sdl_reader_is_used_through_its_front():
+    """Modules outside ``povlens.pov.sdl`` (the package's and the benchmarks') import the
+    SDL subpackage's front, ``povlens.pov.sdl``, never one of its inner modules."""
+    inner = SDL + "."
+    bad = [f"{m}:{line} imports {target}"
+           for m in MODULES if m != SDL and not m.startswith(inner)
+           for target, _, line in _imports(m) if target.startswith(inner)]
+    bad += [f"benchmarks/{name}:{line} imports {target}"
+            for name, target, line in _benchmark_imports() if target.startswith(inner)]
+    assert not bad, "\n".join(bad)

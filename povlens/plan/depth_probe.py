@@ -90,7 +90,7 @@ from povlens.plan.schema import DepthProbeRecord, Plan, PovrayCamera, read_plan
 from povlens.pov.mesh import pinhole_wrapper
 from povlens.pov.povray_options import PovrayOptions
 from povlens.pov.process import start_render
-from povlens.pov.sdl_text import pov_vector
+from povlens.pov.sdl import pov_vector
 from povlens.util.files import write_text
 
 __all__ = ["ProbeView", "probe_depth", "start_probe", "DepthProbe", "probe_wrapper",

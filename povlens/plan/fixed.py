@@ -47,7 +47,7 @@ from povlens.plan.schema import (CameraPlacement, FocusSolution, Inputs, LensSum
 from povlens.pov.mesh import default_sink_centre, render_size
 from povlens.pov.executable import povray_version
 from povlens.pov.povray_options import PovrayOptions
-from povlens.pov.scene_camera import ASPECT_TOLERANCE, parse_scene_camera
+from povlens.pov.sdl import ASPECT_TOLERANCE, parse_scene_camera
 from povlens.pupil.storage import cached_pupil_table
 from povlens.thinlens.model import EquivalentThinLens, fit_thin_lens
 from povlens.thinlens.model_error import measure_model_error
@@ -297,7 +297,7 @@ _READER_PROPORTIONS_NOTE = "the camera's proportions"
 def _camera_proportions(cam, width: int, height: int) -> float | None:
     """|right|/|up| of scene camera ``cam`` when POV-Ray would stretch the image to it
     (a perspective or orthographic camera whose proportions differ from the image's
-    by more than :data:`~povlens.pov.scene_camera.ASPECT_TOLERANCE`), else None."""
+    by more than :data:`~povlens.pov.sdl.ASPECT_TOLERANCE`), else None."""
     if cam is None or cam.projection not in ("perspective", "orthographic"):
         return None
     r = float(np.linalg.norm(cam.right_vector))
@@ -315,14 +315,14 @@ def film_of(opts: ConvertOptions, cam) -> tuple[Film, str | None]:
     ----------
     opts : the options: ``film_size_mm``, else ``film_diagonal_mm``; ``width`` x
         ``height`` pixels.
-    cam : the scene camera (:class:`~povlens.pov.scene_camera.SceneCamera`), or None.
+    cam : the scene camera (:class:`~povlens.pov.sdl.SceneCamera`), or None.
 
     Returns
     -------
     (Film, str or None)
         POV-Ray's rule: the image spans the camera's ``right`` x ``up`` whatever its
         pixels, so when |right|/|up| differs from width/height (beyond
-        :data:`~povlens.pov.scene_camera.ASPECT_TOLERANCE`) the film of the diagonal
+        :data:`~povlens.pov.sdl.ASPECT_TOLERANCE`) the film of the diagonal
         takes the camera's proportions and the pixels are not square: the picture is
         stretched as POV-Ray stretches it (the note says so).  ``film_size_mm`` is
         kept as given; the note then says the camera's proportions are not used.

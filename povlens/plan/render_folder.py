@@ -25,7 +25,7 @@ from pathlib import Path
 from povlens.errors import PovlensError
 from povlens.plan.schema import FocalBlurSettings, Plan, read_plan, write_plan
 from povlens.pov.mesh import SINK_RADIUS, focal_blur_wrapper, pinhole_wrapper
-from povlens.pov.sdl_text import pov_string, pov_vector, read_template
+from povlens.pov.sdl import pov_string, pov_vector, read_template
 from povlens.util.files import write_text
 
 __all__ = ["write_folder", "write_if_changed", "focal_blur_text", "blur_settings",

@@ -47,7 +47,7 @@ import numpy as np
 
 from povlens.errors import PovlensError, UsageError
 from povlens.pov.executable import needs_row_workaround, povray_version
-from povlens.pov.sdl_text import TEMPLATE_DIR, pov_string, pov_vector, read_template
+from povlens.pov.sdl import TEMPLATE_DIR, pov_string, pov_vector, read_template
 from povlens.util.files import write_text
 
 __all__ = [

@@ -23,7 +23,7 @@ from povlens.lens.focus import focus, thick_lens_film_distance_mm, to_mm
 from povlens.lens.paraxial import stopped_down
 from povlens.lens.prescription import read_lens
 from povlens.plan.convert import ConvertOptions, convert, make_plan
-from povlens.pov.scene_camera import SceneCameraError, parse_scene_camera
+from povlens.pov.sdl import SceneCameraError, parse_scene_camera
 from povlens.pupil.build import build_pupil_table, sampling_plane_z_mm
 from povlens.rendering.samples import render_view
 

@@ -20,7 +20,7 @@ import pytest
 from povlens.pov import process as povray
 from povlens.pov.executable import needs_row_workaround, povray_version
 from povlens.errors import PovlensError, UsageError
-from povlens.pov.sdl_text import read_template
+from povlens.pov.sdl import read_template
 from povlens.util.images import read_image
 from povlens.pov.mesh import (
     default_sink_centre,

@@ -19,7 +19,7 @@ import pytest
 from povlens.pov import process as povray
 from povlens.pov.mesh import (default_sink_centre, mesh_wrapper, pinhole_wrapper, render_size,
                               write_ray_mesh)
-from povlens.pov.sdl_text import pov_vector, read_template
+from povlens.pov.sdl import pov_vector, read_template
 from povlens.util.files import write_text
 from povlens.util.images import read_image
 

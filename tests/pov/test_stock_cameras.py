@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from povlens.pov import process as povray
-from povlens.pov.scene_camera import DEFAULT_CAMERA_NOTE, SceneCameraError, parse_scene_camera
-from povlens.pov.sdl_text import pov_string, pov_vector
+from povlens.pov.sdl import (DEFAULT_CAMERA_NOTE, SceneCameraError, parse_scene_camera,
+                             pov_string, pov_vector)
 from povlens.util.files import write_text
 from povlens.util.images import read_image
 

@@ -3,7 +3,7 @@
 :class:`DirectiveStream` hands out the tokens POV-Ray's parser would see: ``#if`` /
 ``#ifdef`` / ``#ifndef`` / ``#elseif`` / ``#else``, ``#switch`` / ``#case`` / ``#range`` /
 ``#break``, ``#while`` and ``#for`` loops, ``#include`` (found as POV-Ray finds it),
-``#declare`` / ``#local`` / ``#undef`` (:mod:`povlens.pov.sdl_declare`), ``#macro``
+``#declare`` / ``#local`` / ``#undef`` (:mod:`povlens.pov.sdl.declarations`), ``#macro``
 definitions and calls, ``#version`` and the message and file directives are processed
 where they stand, also inside a camera block or an expression (``Parse_Directive`` in
 ``source/backend/parser/tokenize.cpp``).
@@ -11,7 +11,7 @@ where they stand, also inside a camera block or an expression (``Parse_Directive
 A condition povlens cannot evaluate (it depends on an object, a random number, an
 undeclared name) does not stop the reading: every branch is read, *uncertain*
 (:attr:`DirectiveStream.certain` is False), and what is declared there becomes unknown.
-Loops are followed within a budget (:mod:`povlens.pov.sdl_flow`); past it, what they
+Loops are followed within a budget (:mod:`povlens.pov.sdl.control_flow`); past it, what they
 assign becomes unknown.
 """
 
@@ -22,14 +22,14 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from povlens.pov.sdl_declare import Declarations
-from povlens.pov.sdl_errors import SceneCameraError, SdlEvalError
-from povlens.pov.sdl_expressions import ExpressionParser
-from povlens.pov.sdl_flow import OPENERS, FlowDirectives, Frame
-from povlens.pov.sdl_include import find_include
-from povlens.pov.sdl_lexer import SourceFile, Token, TokenStream
-from povlens.pov.sdl_symbols import SymbolTable
-from povlens.pov.sdl_values import Macro, SdlArray, UnknownValue, as_float, as_string
+from povlens.pov.sdl.control_flow import OPENERS, FlowDirectives, Frame
+from povlens.pov.sdl.declarations import Declarations
+from povlens.pov.sdl.errors import SceneCameraError, SdlEvalError
+from povlens.pov.sdl.expressions import ExpressionParser
+from povlens.pov.sdl.include_paths import find_include
+from povlens.pov.sdl.lexer import SourceFile, Token, TokenStream
+from povlens.pov.sdl.symbols import SymbolTable
+from povlens.pov.sdl.values import Macro, SdlArray, UnknownValue, as_float, as_string
 
 __all__ = ["DirectiveStream", "Frame", "MacroCallError", "MAX_INCLUDE_BYTES", "OPENERS"]
 

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from povlens.pov.sdl_errors import SdlEvalError
+from povlens.pov.sdl.errors import SdlEvalError
 
 __all__ = ["UnknownValue", "Transform", "Macro", "SdlArray", "rotation_matrix",
            "axis_rotation_matrix", "as_vector", "as_float", "as_string", "promote", "binop",

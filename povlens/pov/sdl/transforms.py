@@ -10,10 +10,10 @@ from typing import Callable
 
 import numpy as np
 
-from povlens.pov.sdl_errors import SdlEvalError
-from povlens.pov.sdl_expressions import ExpressionParser, TokenSource
-from povlens.pov.sdl_lexer import Token
-from povlens.pov.sdl_values import Transform, UnknownValue, as_float, as_vector, rotation_matrix
+from povlens.pov.sdl.errors import SdlEvalError
+from povlens.pov.sdl.expressions import ExpressionParser, TokenSource
+from povlens.pov.sdl.lexer import Token
+from povlens.pov.sdl.values import Transform, UnknownValue, as_float, as_vector, rotation_matrix
 
 __all__ = ["TRANSFORM_WORDS", "TransformReader"]
 

@@ -14,8 +14,8 @@ from typing import Callable
 
 import numpy as np
 
-from povlens.pov.sdl_errors import SdlEvalError
-from povlens.pov.sdl_values import (as_float, as_string, as_vector, axis_rotation_matrix,
+from povlens.pov.sdl.errors import SdlEvalError
+from povlens.pov.sdl.values import (as_float, as_string, as_vector, axis_rotation_matrix,
                                     describe, rotation_matrix)
 
 __all__ = ["FUNCTIONS", "CONSTANTS", "COMPONENTS", "UNKNOWABLE", "COLOUR_WORDS", "component",

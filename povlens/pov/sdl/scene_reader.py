@@ -1,7 +1,7 @@
 """Reading a POV-Ray scene the way POV-Ray's parser walks it, to find its camera.
 
 :class:`SceneReader` follows the statements of a scene, its ``#include`` files and its
-macro calls through a :class:`~povlens.pov.sdl_directives.DirectiveStream` (which
+macro calls through a :class:`~povlens.pov.sdl.directives.DirectiveStream` (which
 processes the directives); objects and other blocks are skipped.  Its result is the
 camera POV-Ray would use: the *last* camera statement met.
 """
@@ -11,11 +11,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Mapping, Sequence
 
-from povlens.pov.sdl_camera import CameraState, parse_camera_block
-from povlens.pov.sdl_directives import DirectiveStream, Frame, MacroCallError
-from povlens.pov.sdl_errors import SdlEvalError
-from povlens.pov.sdl_lexer import Token
-from povlens.pov.sdl_values import UnknownValue
+from povlens.pov.sdl.camera_block import CameraState, parse_camera_block
+from povlens.pov.sdl.directives import DirectiveStream, Frame, MacroCallError
+from povlens.pov.sdl.errors import SdlEvalError
+from povlens.pov.sdl.lexer import Token
+from povlens.pov.sdl.values import UnknownValue
 
 __all__ = ["SceneReader", "still_constants"]
 

@@ -1,4 +1,4 @@
-"""povlens.scene_camera: reading the camera of a POV-Ray scene.
+"""povlens.pov.sdl.scene_camera: reading the camera of a POV-Ray scene.
 
 The decisive check renders each scene with its own camera and with an
 explicit-basis pinhole camera built from the parsed vectors: the two images
@@ -20,9 +20,9 @@ from povlens.errors import PovlensError
 from povlens.util.images import read_image
 from povlens.pov.mesh import pinhole_wrapper
 from povlens.util.files import write_text
-from povlens.pov.scene_camera import DEFAULT_CAMERA_NOTE, SceneCameraError, parse_scene_camera
+from povlens.pov.sdl.scene_camera import DEFAULT_CAMERA_NOTE, SceneCameraError, parse_scene_camera
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 HAVE_POVRAY = shutil.which("povray") is not None
 
 BODY = """

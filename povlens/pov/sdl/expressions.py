@@ -6,7 +6,7 @@
 1``...), constants (``pi``, ``x``, ``u``, ``t``...), ``+ - * /``, comparisons, ``& | !``,
 ``? :``, components (``.x``, ``.red``, ``.gray``...), array elements ``A[i]``,
 ``defined()``, ``dimension_size()`` and the built-in functions of
-:data:`~povlens.pov.sdl_functions.FUNCTIONS`.  It reads tokens from a
+:data:`~povlens.pov.sdl.builtin_functions.FUNCTIONS`.  It reads tokens from a
 :class:`TokenSource` (the directive layer, so that ``#if`` and macros work inside
 expressions) and asks ``lookup`` for declared names.
 """
@@ -17,11 +17,11 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from povlens.pov.sdl_errors import SdlEvalError
-from povlens.pov.sdl_functions import (COLOUR_WORDS, COMPONENTS, CONSTANTS, FUNCTIONS,
-                                       UNKNOWABLE, component, srgb_to_linear)
-from povlens.pov.sdl_lexer import Token
-from povlens.pov.sdl_values import SdlArray, as_float, binop, promote
+from povlens.pov.sdl.builtin_functions import (COLOUR_WORDS, COMPONENTS, CONSTANTS, FUNCTIONS,
+                                               UNKNOWABLE, component, srgb_to_linear)
+from povlens.pov.sdl.errors import SdlEvalError
+from povlens.pov.sdl.lexer import Token
+from povlens.pov.sdl.values import SdlArray, as_float, binop, promote
 
 __all__ = ["TokenSource", "ExpressionParser", "decode_string"]
 

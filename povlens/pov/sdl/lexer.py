@@ -6,7 +6,7 @@ operators; whitespace, ``//`` and nested ``/* */`` comments are dropped.  Blocks
 bulky data (a mesh's vertices) can be skipped at text level without tokenizing them.
 A macro body is read as a range of its file's text; a loop goes back to a
 :meth:`TokenStream.mark`.  The stream does no directive processing itself (that is
-:mod:`povlens.pov.sdl_directives`).
+:mod:`povlens.pov.sdl.directives`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import re
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-from povlens.pov.sdl_errors import SceneCameraError, SdlEvalError
+from povlens.pov.sdl.errors import SceneCameraError, SdlEvalError
 
 __all__ = ["Token", "SourceFile", "TokenStream"]
 
@@ -51,7 +51,7 @@ class Token(NamedTuple):
     body's local names.
     """
 
-    kind: str  # "number", "string", "directive", "ident", "op", "eof" (and "stop", see sdl_directives)
+    kind: str  # "number", "string", "directive", "ident", "op", "eof" (and "stop", see directives)
     text: str
     path: str
     line: int

@@ -1,8 +1,8 @@
 """``#declare`` / ``#local`` / ``#undef``, macro arguments, arrays and the file directives
-of POV-Ray scene description language, for :class:`~povlens.pov.sdl_directives.DirectiveStream`.
+of POV-Ray scene description language, for :class:`~povlens.pov.sdl.directives.DirectiveStream`.
 
 A declared value is a number, vector, colour or string, a camera, a transform, an array,
-or an :class:`~povlens.pov.sdl_values.UnknownValue` (an object, a texture, a user
+or an :class:`~povlens.pov.sdl.values.UnknownValue` (an object, a texture, a user
 function, a spline, or a value povlens cannot compute) that says why.  Like POV-Ray
 (``Parse_Declare``), the value of a ``#declare`` ends where the next ``#declare`` starts,
 even without its ``;``.
@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import math
 
-from povlens.pov.sdl_camera import CameraState, parse_camera_block
-from povlens.pov.sdl_errors import SdlEvalError
-from povlens.pov.sdl_functions import CONSTANTS, FUNCTIONS
-from povlens.pov.sdl_lexer import Token
-from povlens.pov.sdl_transforms import TransformReader
-from povlens.pov.sdl_values import Macro, SdlArray, Transform, UnknownValue, as_float, as_string
+from povlens.pov.sdl.builtin_functions import CONSTANTS, FUNCTIONS
+from povlens.pov.sdl.camera_block import CameraState, parse_camera_block
+from povlens.pov.sdl.errors import SdlEvalError
+from povlens.pov.sdl.lexer import Token
+from povlens.pov.sdl.transforms import TransformReader
+from povlens.pov.sdl.values import Macro, SdlArray, Transform, UnknownValue, as_float, as_string
 
 __all__ = ["Declarations"]
 

@@ -7,7 +7,7 @@ reads one block's items -- projection, ``location``, ``look_at``, ``sky``, ``up`
 in POV-Ray's order: for ``#version`` >= 3.5 right, direction, angle, up, sky, location,
 look_at, focal_point, then the transforms; older versions apply the items as written.
 Directives and macros inside the block are handled by the stream it reads
-(:class:`povlens.pov.sdl_directives.DirectiveStream`).
+(:class:`povlens.pov.sdl.directives.DirectiveStream`).
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from povlens.pov.sdl_errors import MeshCameraError, SdlEvalError
-from povlens.pov.sdl_expressions import ExpressionParser
-from povlens.pov.sdl_lexer import Token
-from povlens.pov.sdl_transforms import TRANSFORM_WORDS, TransformReader
-from povlens.pov.sdl_values import UnknownValue, as_float, as_vector
+from povlens.pov.sdl.errors import MeshCameraError, SdlEvalError
+from povlens.pov.sdl.expressions import ExpressionParser
+from povlens.pov.sdl.lexer import Token
+from povlens.pov.sdl.transforms import TRANSFORM_WORDS, TransformReader
+from povlens.pov.sdl.values import UnknownValue, as_float, as_vector
 
 __all__ = ["CameraState", "CAMERA_WORDS", "PROJECTIONS", "parse_camera_block"]
 
@@ -152,7 +152,7 @@ def parse_camera_block(
     Parameters
     ----------
     stream : the scene's tokens after directives and macros
-        (:class:`~povlens.pov.sdl_directives.DirectiveStream`: ``peek``, ``next``,
+        (:class:`~povlens.pov.sdl.directives.DirectiveStream`: ``peek``, ``next``,
         ``mark``, ``reset``, ``skip_rest_raw``).
     expr : the expression evaluator reading ``stream``.
     tok : the ``camera`` token (its place names the camera).

@@ -5,12 +5,12 @@
 3.7 does (``Parse_Camera`` in ``source/backend/parser/parse.cpp``), returning
 the world-space camera basis in scene units.
 
-The reading is done in layers: :mod:`povlens.pov.sdl_lexer` (tokens, comments,
-strings), :mod:`povlens.pov.sdl_directives` (``#include``, ``#if``, ``#switch``,
-loops, macros; with :mod:`~povlens.pov.sdl_declare` for ``#declare``),
-:mod:`povlens.pov.sdl_expressions` (numbers, vectors, colours, strings),
-:mod:`povlens.pov.sdl_camera` (the ``camera { }`` block) and
-:mod:`povlens.pov.sdl_reader` (statements); this module turns the camera found into
+The reading is done in layers: :mod:`povlens.pov.sdl.lexer` (tokens, comments,
+strings), :mod:`povlens.pov.sdl.directives` (``#include``, ``#if``, ``#switch``,
+loops, macros; with :mod:`~povlens.pov.sdl.declarations` for ``#declare``),
+:mod:`povlens.pov.sdl.expressions` (numbers, vectors, colours, strings),
+:mod:`povlens.pov.sdl.camera_block` (the ``camera { }`` block) and
+:mod:`povlens.pov.sdl.scene_reader` (statements); this module turns the camera found into
 a :class:`SceneCamera`.
 
 What is understood
@@ -70,11 +70,11 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from povlens.pov.sdl_camera import CameraState
-from povlens.pov.sdl_errors import SceneCameraError, with_explicit_hint
-from povlens.pov.sdl_include import default_library_paths
-from povlens.pov.sdl_reader import SceneReader, still_constants
-from povlens.pov.sdl_values import UnknownValue
+from povlens.pov.sdl.camera_block import CameraState
+from povlens.pov.sdl.errors import SceneCameraError, with_explicit_hint
+from povlens.pov.sdl.include_paths import default_library_paths
+from povlens.pov.sdl.scene_reader import SceneReader, still_constants
+from povlens.pov.sdl.values import UnknownValue
 
 __all__ = ["SceneCamera", "SceneCameraError", "parse_scene_camera", "DEFAULT_CAMERA_NOTE"]
 

@@ -2,7 +2,7 @@
 
 :class:`SceneCameraError` is what callers see; :class:`SdlEvalError` is raised inside
 the reader for one construct it cannot evaluate and becomes a :class:`SceneCameraError`
-(or an unknown value) before it leaves :func:`povlens.pov.scene_camera.parse_scene_camera`.
+(or an unknown value) before it leaves :func:`povlens.pov.sdl.scene_camera.parse_scene_camera`.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Conditionals and loops of POV-Ray scene description language, for
-:class:`~povlens.pov.sdl_directives.DirectiveStream` (``Parse_Directive`` in
+:class:`~povlens.pov.sdl.directives.DirectiveStream` (``Parse_Directive`` in
 ``source/backend/parser/tokenize.cpp``).
 
 ``#if`` / ``#ifdef`` / ``#ifndef`` / ``#elseif`` / ``#else``; ``#switch`` / ``#case`` /
@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import dataclasses
 
-from povlens.pov.sdl_errors import SdlEvalError
-from povlens.pov.sdl_lexer import Mark, SourceFile, Token
-from povlens.pov.sdl_values import as_float
+from povlens.pov.sdl.errors import SdlEvalError
+from povlens.pov.sdl.lexer import Mark, SourceFile, Token
+from povlens.pov.sdl.values import as_float
 
 __all__ = ["Frame", "FlowDirectives", "OPENERS", "MAX_LOOP_ITERATIONS", "MAX_LOOP_TOKENS"]
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Iterable, Mapping
 
-from povlens.pov.sdl_values import UnknownValue
+from povlens.pov.sdl.values import UnknownValue
 
 __all__ = ["SymbolTable"]
 

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from povlens.pov import sdl_flow
-from povlens.pov.scene_camera import SceneCameraError, parse_scene_camera
-from povlens.pov.sdl_include import default_library_paths, find_include
-from povlens.pov.sdl_reader import SceneReader, still_constants
-from povlens.pov.sdl_values import SdlArray, UnknownValue, promote
+from povlens.pov.sdl import control_flow
+from povlens.pov.sdl.include_paths import default_library_paths, find_include
+from povlens.pov.sdl.scene_camera import SceneCameraError, parse_scene_camera
+from povlens.pov.sdl.scene_reader import SceneReader, still_constants
+from povlens.pov.sdl.values import SdlArray, UnknownValue, promote
 
 HAVE_POVRAY = shutil.which("povray") is not None
 
@@ -196,7 +196,7 @@ def test_frame_values_of_a_still_and_of_a_clock(tmp_path):
 
 
 def test_long_loops_are_cut_and_what_they_assign_is_unknown(tmp_path, monkeypatch):
-    monkeypatch.setattr(sdl_flow, "MAX_LOOP_ITERATIONS", 50)
+    monkeypatch.setattr(control_flow, "MAX_LOOP_ITERATIONS", 50)
     scene = tmp_path / "long.pov"
     scene.write_text("#declare I = 0; #declare P = 0;\n"
                      "#while (I < 1000) #declare P = P + 1; #declare I = I + 1; #end\n"

@@ -3,8 +3,8 @@ twice: issue 14), but never past a change of the scene or of a file it includes.
 
 import numpy as np
 
-import povlens.pov.scene_camera as sc
-from povlens.pov.scene_camera import parse_scene_camera
+import povlens.pov.sdl.scene_camera as sc
+from povlens.pov.sdl.scene_camera import parse_scene_camera
 
 
 def _write(path, text):
