@@ -68,7 +68,7 @@ from povlens.lens.film import Film
 from povlens.lens.tracer import trace_from_film
 from povlens.plan.schema import Decision, FocalBlurSettings
 from povlens.pupil.illumination import relative_illumination_map
-from povlens.pupil.sampling import sobol_points
+from povlens.pupil.monte_carlo import sobol_points
 
 __all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "shape_error_px", "vignetting_rmse", "shift_rmse",
            "probe_image_error", "film_radius_map_mm", "blur_range_px", "model_depths",

@@ -1,7 +1,7 @@
 """Baselines for the exit-pupil table: pbrt's 64 boxes and naive rear-element sampling.
 
 Both offer the sampler interface of :class:`povlens.pupil.table.PupilTable`
-(:mod:`povlens.pupil.sampler`: ``sample(film_xy, u) -> LensSample``,
+(:mod:`povlens.pupil.sampler_interface`: ``sample(film_xy, u) -> LensSample``,
 ``pass_fraction``, ``irradiance_factor``) so benchmarks and renders can swap
 them.  Both sample on pbrt's plane, the rear-vertex plane ``z = film_distance``
 (camera frame of :mod:`povlens.lens.frames`), and weight a ray by
@@ -40,8 +40,9 @@ import numpy as np
 
 from povlens.errors import UsageError
 from povlens.lens.prescription import LensPrescription, sag_mm
-from povlens.pupil.sampler import (LensSample, SamplerMeasurements, check_sample_arguments,
-                                   finish_sample, polar_film_coordinates)
+from povlens.pupil.sampler_interface import (LensSample, SamplerMeasurements,
+                                             check_sample_arguments, finish_sample,
+                                             polar_film_coordinates)
 from povlens.lens.tracer import trace_from_film
 
 __all__ = ["PbrtBoxes", "NaiveRearElement", "radical_inverse", "PBRT_INTERVALS",

@@ -12,7 +12,7 @@ f toward P and is traced through the lens.
 * **Pupil point.**  P is uniform on an ellipse containing f's (dilated, conservative)
   table region, so every ray the lens passes can be drawn: the weight of a passing ray,
   cos^4(theta) / z_p^2 * pi a b, is unbiased (the pupil sampler's weight,
-  :func:`povlens.pupil.sampler.finish_sample`, with pdf 1 / (pi a b)).  The map is
+  :func:`povlens.pupil.sampler_interface.finish_sample`, with pdf 1 / (pi a b)).  The map is
   smooth in f, so a fixed q gives a smooth ray field a coarse mesh carries.
 * **Sample points.**  Pass k takes the k-th point X_k of a scrambled 4-D Sobol sequence:
   dimensions 0-1 the sub-pixel offset (x right, y down, pixels), 2-3 q through the
@@ -38,7 +38,7 @@ import numpy as np
 from povlens.lens.film import Film
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_unclipped_from_film
-from povlens.pupil.sampling import sobol_points
+from povlens.pupil.monte_carlo import sobol_points
 
 __all__ = ["FieldRays", "PupilMap", "bounding_disc_radius_mm", "field_sample_points",
            "tile_shifts", "tile_points", "concentric_disc_mm", "image_to_film_mm", "trace_field",

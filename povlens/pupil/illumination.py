@@ -45,7 +45,7 @@ F/1 singlet stopped down, far off axis), the centre or the bound fails its check
 direction inside the boundary is blocked -- the radius falls back to the mesh
 render's own estimator, the mean of ``weight * passed`` over
 :data:`FALLBACK_SAMPLES` Sobol' points of the table's sampler
-(:func:`povlens.pupil.sampling.irradiance_factor`).  Beyond a vignetting cut-off
+(:func:`povlens.pupil.monte_carlo.irradiance_factor`).  Beyond a vignetting cut-off
 E is 0.
 
 Accuracy and cost are measured in docs/decisions/planning.md ("Relative
@@ -61,7 +61,7 @@ import numpy as np
 
 from povlens.errors import OpticsError
 from povlens.pupil.prober import PupilProber
-from povlens.pupil.sampling import irradiance_factor
+from povlens.pupil.monte_carlo import irradiance_factor
 
 __all__ = ["IlluminationProfile", "illumination_profile", "irradiance_at",
            "relative_illumination_map", "profile_record", "profile_from_record",

@@ -21,8 +21,8 @@ import numpy as np
 
 from povlens.pupil.aperture_domain import iris_scale
 from povlens.pupil.field import concentric_disc_mm
-from povlens.pupil.sampler import (LensSample, SamplerMeasurements, check_sample_arguments,
-                                   finish_sample)
+from povlens.pupil.sampler_interface import (LensSample, SamplerMeasurements,
+                                             check_sample_arguments, finish_sample)
 
 __all__ = ["IrisPixelSampler"]
 

@@ -19,7 +19,7 @@ Samples
 Sample k of pixel p uses the k-th point of a scrambled 4-D Sobol sequence
 (film jitter, pupil u), shifted per pixel by a random Cranley-Patterson
 rotation so that neighbouring pixels do not share sample positions (shared
-positions show as ghosting).  The pupil sampler (:mod:`povlens.pupil.sampler`) turns
+positions show as ghosting).  The pupil sampler (:mod:`povlens.pupil.sampler_interface`) turns
 (film point, u) into a ray toward the exit pupil with its radiometric weight.
 """
 
@@ -32,7 +32,7 @@ import numpy as np
 from povlens.lens.film import Film
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import stop_hits_from_film, trace_from_film
-from povlens.pupil.sampling import sobol_points
+from povlens.pupil.monte_carlo import sobol_points
 
 __all__ = ["ScenePlacement", "SampleRays", "sample_points", "sample_rays"]
 
@@ -130,7 +130,7 @@ def sample_rays(lens: LensPrescription, film_distance_mm: float, film: Film, sam
 
     sampler : an object with ``sample(film_xy (n, 2), u (n, 2))`` returning
         ``film_point``, ``direction``, ``weight`` and ``valid`` arrays (see
-        :mod:`povlens.pupil.sampler`).
+        :mod:`povlens.pupil.sampler_interface`).
     points : (H, W, 4) from :func:`sample_points`.
     rows : film rows [start, end) to sample (default all); the other rows get no
         ray (``valid`` False, weight 0) and cost nothing.

@@ -45,8 +45,9 @@ import numpy as np
 from povlens.errors import OpticsError
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import LensPrescription
-from povlens.pupil.sampler import (LensSample, SamplerMeasurements, check_sample_arguments,
-                                   finish_sample, polar_film_coordinates)
+from povlens.pupil.sampler_interface import (LensSample, SamplerMeasurements,
+                                             check_sample_arguments, finish_sample,
+                                             polar_film_coordinates)
 from povlens.pupil.table_file import FORMAT_NAME, FORMAT_VERSION, read_table_file, write_table_file
 
 __all__ = ["PupilTable"]

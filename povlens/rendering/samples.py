@@ -54,7 +54,7 @@ from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.options import povray_options_of
 from povlens.plan.aperture import shape_of_inputs
 from povlens.plan.schema import Plan, PovraySettings, read_plan
-from povlens.pupil.sampling import exposure_normalisation
+from povlens.pupil.monte_carlo import exposure_normalisation
 from povlens.pupil.storage import cached_pupil_table
 from povlens.rendering.composite import accumulate_samples, measurement_image
 from povlens.rendering.pixel_sampler import pixel_sampler

@@ -10,7 +10,7 @@ from povlens.lens.prescription import read_lens
 from povlens.lens.tracer import trace_from_film
 from povlens.pupil.band_table import band_dilation, band_table
 from povlens.pupil.build import build_pupil_table
-from povlens.pupil.sampling import irradiance_factor
+from povlens.pupil.monte_carlo import irradiance_factor
 
 SINGLET = """# plano-convex singlet of a fictional V_d = 12 glass, the stop 10 mm before it
 0\t10\t1\t6\t0

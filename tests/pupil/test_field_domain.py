@@ -121,7 +121,7 @@ def test_weights_are_unbiased_against_a_dense_grid():
     d2 = ((P - f) ** 2).sum(1) + zp * zp
     g4 = (zp * zp / d2) ** 2 / (zp * zp)
     exact = (_trace(lens, fd, table, f, P) * g4).sum() * (2 * rb / n) ** 2
-    from povlens.pupil.sampling import sobol_points
+    from povlens.pupil.monte_carlo import sobol_points
     u = np.asarray(sobol_points(1 << 14, 2, seed=4))
     pm = PupilMap(dom, (0.0, 0.0))
     ff = np.repeat(f[None], len(u), 0)

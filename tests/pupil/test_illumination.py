@@ -17,7 +17,7 @@ from povlens.pupil.illumination import (IlluminationProfile, illumination_profil
                                         relative_illumination_map)
 from povlens.pupil.prober import PupilProber
 from povlens.pupil.rays import ScenePlacement, sample_points, sample_rays
-from povlens.pupil.sampling import exposure_normalisation, sobol_points
+from povlens.pupil.monte_carlo import exposure_normalisation, sobol_points
 
 HALF_DIAGONAL = 17.5  # 35 mm film diagonal
 

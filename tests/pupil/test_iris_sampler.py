@@ -14,7 +14,7 @@ from povlens.pupil.aperture_domain import iris_domain
 from povlens.pupil.build import build_pupil_table
 from povlens.pupil.field import bounding_disc_radius_mm
 from povlens.pupil.iris_sampler import IrisPixelSampler
-from povlens.pupil.sampling import irradiance_factor, pass_fraction
+from povlens.pupil.monte_carlo import irradiance_factor, pass_fraction
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +62,7 @@ def test_iris_sampler_is_unbiased_against_a_brute_force_average(iris):
         noise = brute * math.sqrt((1 - passed.mean()) / max(passed.sum(), 1))
         # irradiance_factor samples film points (r, 0): the lens is symmetric, the iris
         # is not, so sample the film point itself through the sampler
-        from povlens.pupil.sampling import sobol_points
+        from povlens.pupil.monte_carlo import sobol_points
         u = np.asarray(sobol_points(1 << 14, 2, seed=3))
         s = sampler.sample(np.tile(f, (len(u), 1)), u)
         t = trace_from_film(lens, fd, s.film_point, s.direction)

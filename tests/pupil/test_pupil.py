@@ -15,10 +15,10 @@ from povlens.lens.paraxial import paraxial_data, stopped_down
 from povlens.lens.prescription import read_lens
 from povlens.pupil.build import build_pupil_table, sampling_plane_z_mm
 from povlens.pupil.prober import PupilProber
-from povlens.pupil.sampler import LensSample
+from povlens.pupil.sampler_interface import LensSample
 from povlens.pupil.storage import load, load_if_current
 from povlens.pupil.baselines import NaiveRearElement, PbrtBoxes
-from povlens.pupil.sampling import sobol_points
+from povlens.pupil.monte_carlo import sobol_points
 from povlens.lens.tracer import trace_from_film
 
 HALF_DIAGONAL = 17.5  # 35 mm film diagonal

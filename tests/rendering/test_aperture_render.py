@@ -238,7 +238,7 @@ def test_iris_domain_weights_are_unbiased():
     X, Y = np.meshgrid(g * RB, g * RB)
     ok, f = passes(np.c_[X.ravel(), Y.ravel()])
     exact = (ok * f).sum() * (2 * RB / n) ** 2
-    from povlens.pupil.sampling import sobol_points
+    from povlens.pupil.monte_carlo import sobol_points
     u = np.asarray(sobol_points(1 << 14, 2, seed=1))
     pts = [iris_point_mm(shape, flip, RD, RB, p) for p in concentric_disc_mm(u, 1.0)]
     Q = np.array([p for p, _ in pts])

@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 
 from povlens.lens.prescription import LensPrescription
-from povlens.pupil.sampling import PassFraction, irradiance_factor, pass_fraction
+from povlens.pupil.monte_carlo import PassFraction, irradiance_factor, pass_fraction
 
 __all__ = ["LensSample", "finish_sample", "check_sample_arguments", "polar_film_coordinates",
            "SamplerMeasurements"]
@@ -142,13 +142,15 @@ class SamplerMeasurements:
 
     def pass_fraction(self, film_radius_mm, *, n_samples: int = 1024,
                       seed: int = 0) -> PassFraction:
-        """:class:`povlens.pupil.sampling.PassFraction` of this sampler at each film radius."""
+        """:class:`~povlens.pupil.monte_carlo.PassFraction` of this sampler at each film
+        radius."""
         return pass_fraction(self, self.lens, self.film_distance_mm, film_radius_mm,
                              n_samples=n_samples, seed=seed)
 
     def irradiance_factor(self, film_radius_mm, *, n_samples: int = 4096,
                           seed: int = 0) -> np.ndarray:
-        """Estimated E/L at each film radius (:func:`povlens.pupil.sampling.irradiance_factor`).
+        """Estimated E/L at each film radius
+        (:func:`povlens.pupil.monte_carlo.irradiance_factor`).
 
         Remembered per sampler for the radii, sample count and seed (a sampler does
         not change once built): an auto conversion asks for the same radii twice,

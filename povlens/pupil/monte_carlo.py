@@ -1,4 +1,5 @@
-"""Sample points for the lens, and estimates built on a lens sampler.
+"""Monte Carlo over the lens: its sample points (QMC point sets) and the estimates built
+on a lens sampler (pass fraction, irradiance factor, exposure normalisation).
 
 Point sets (all float64 in [0, 1)^d, reproducible from ``seed``)
 ----------------------------------------------------------------
@@ -16,7 +17,7 @@ Point sets (all float64 in [0, 1)^d, reproducible from ``seed``)
 Lens samplers
 -------------
 Any object with ``sample(film_xy (n, 2) mm, u (n, 2)) -> LensSample`` (see
-:mod:`povlens.pupil.sampler`): the exit-pupil table
+:mod:`povlens.pupil.sampler_interface`): the exit-pupil table
 (:class:`povlens.pupil.table.PupilTable`) and the baselines of
 :mod:`povlens.pupil.baselines`.  ``sample`` only proposes a ray and its weight;
 whether the ray gets through is decided by tracing it.  The estimate of the

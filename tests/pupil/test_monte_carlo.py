@@ -10,11 +10,11 @@ from povlens.lens.focus import thick_lens_film_distance_mm
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import read_lens
 from povlens.pupil.build import build_pupil_table
-from povlens.pupil.sampler import LensSample
+from povlens.pupil.sampler_interface import LensSample
 from povlens.pupil.baselines import NaiveRearElement, radical_inverse
-from povlens.pupil.sampling import (cranley_patterson, exposure_normalisation, halton_points,
-                              irradiance_factor, lens_points, pass_fraction, sobol_points,
-                              stratified_points)
+from povlens.pupil.monte_carlo import (cranley_patterson, exposure_normalisation,
+                                       halton_points, irradiance_factor, lens_points,
+                                       pass_fraction, sobol_points, stratified_points)
 
 
 @pytest.mark.parametrize("gen", [sobol_points, halton_points, stratified_points])
