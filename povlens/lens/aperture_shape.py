@@ -1,7 +1,7 @@
 """Shaped aperture stops: an iris of N blades, or a grey-level mask over the stop's disc.
 
-Frames: the stop plane's local (x, y) in mm, the camera frame's x and y (:mod:`povlens.lens.frames`)
-with the origin on the axis.  A highlight far behind the plane in focus shows the shape as
+Frames: the stop plane's local (x, y) in mm, the camera frame's x and y
+(:mod:`povlens.lens.coordinates`) with the origin on the axis.  A highlight far behind the plane in focus shows the shape as
 it is in these coordinates, image right = +x, image up = +y (the film inverts the blur spot
 and the image inverts the film again).
 

@@ -5,7 +5,7 @@
 (:mod:`povlens.lens.reference_tracer`, a different derivation) and compares them.
 This module is pure: it prints nothing and writes no files.
 
-Ray set (camera frame of :mod:`povlens.lens.frames`, mm)
+Ray set (camera frame of :mod:`povlens.lens.coordinates`, mm)
 --------------------------------------------------
 * ``n_film`` film points on z = 0 filling the disc of diameter ``film_diagonal_mm``
   (so any frame of that diagonal is covered): a sunflower (Vogel) spiral with

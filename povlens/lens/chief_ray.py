@@ -1,6 +1,6 @@
 """Real chief rays: rays from film points through the centre of the aperture stop.
 
-Camera frame of :mod:`povlens.lens.frames` (mm, film at z = 0, lens toward +z).
+Camera frame of :mod:`povlens.lens.coordinates` (mm, film at z = 0, lens toward +z).
 Used to place the thin-lens model's field of view and to seed the search for a
 tiny exit pupil.
 """

@@ -14,7 +14,7 @@ The lens at a wavelength has the same geometry (radii, thicknesses, apertures):
 the film stays where the d-line focus put it, which is what makes longitudinal
 colour visible.  Chromatic aberration of a focused lens (lateral colour of the real
 chief rays, longitudinal colour of the paraxial focus) is :func:`chromatic_aberration`.
-Camera frame and units of :mod:`povlens.lens.frames` (mm).
+Camera frame and units of :mod:`povlens.lens.coordinates` (mm).
 """
 
 from __future__ import annotations

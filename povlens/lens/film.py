@@ -1,6 +1,6 @@
 """The film: its physical size, its pixels, and where each pixel lies.
 
-Film coordinates are the x, y of the camera frame (:mod:`povlens.lens.frames`), in mm.
+Film coordinates are the x, y of the camera frame (:mod:`povlens.lens.coordinates`), in mm.
 The lens inverts the image, so the pixel at image position (u right, v up) lies
 at film point (-u, -v): pixel column i, row j (row 0 at the top) with sub-pixel
 offset (jx, jy) in [0, 1) has

@@ -7,7 +7,7 @@ Everything per ray is plain Python ``float`` arithmetic with :mod:`math`.
 
 Frames and units
 ----------------
-Camera frame of :mod:`povlens.lens.frames`: millimetres, film at z = 0, +z toward the
+Camera frame of :mod:`povlens.lens.coordinates`: millimetres, film at z = 0, +z toward the
 scene, rear vertex at ``z = film_distance_mm``.  Inside the loop each surface i
 uses its local sag coordinates (x, y, s) with ``s = vertex_z_mm[i] - z`` (s grows
 toward the film) and the ray direction ``(dx, dy, ds)`` with ``ds = -dz``.
@@ -85,7 +85,7 @@ import math
 import numpy as np
 
 from povlens.lens.aperture_shape import T_MIN
-from povlens.lens.frames import vertex_z_mm
+from povlens.lens.coordinates import vertex_z_mm
 from povlens.lens.prescription import LensPrescription
 
 __all__ = ["RayTrace", "ReferenceTraceResult", "trace_ray_from_film", "trace_ray_from_scene",

@@ -1,6 +1,6 @@
 """Exact real-ray tracing through a lens system, vectorized over rays.
 
-Frames are those of :mod:`povlens.lens.frames` (camera frame, mm, +z toward the scene).
+Frames are those of :mod:`povlens.lens.coordinates` (camera frame, mm, +z toward the scene).
 
 Algorithm (per surface, all rays at once)
 -----------------------------------------
@@ -46,7 +46,7 @@ import dataclasses
 import numpy as np
 
 from povlens.lens.aperture_shape import shape_margin_mm2
-from povlens.lens.frames import vertex_z_mm
+from povlens.lens.coordinates import vertex_z_mm
 from povlens.lens.prescription import LensPrescription
 
 __all__ = ["TraceResult", "UnclippedTrace", "trace_from_film", "trace_from_scene",

@@ -4,7 +4,7 @@ Both offer the sampler interface of :class:`povlens.pupil.table.PupilTable`
 (:mod:`povlens.pupil.sampler_interface`: ``sample(film_xy, u) -> LensSample``,
 ``pass_fraction``, ``irradiance_factor``) so benchmarks and renders can swap
 them.  Both sample on pbrt's plane, the rear-vertex plane ``z = film_distance``
-(camera frame of :mod:`povlens.lens.frames`), and weight a ray by
+(camera frame of :mod:`povlens.lens.coordinates`), and weight a ray by
 ``cos^4(theta) / z^2 / pdf`` (the camera measurement equation, *Physically Based
 Rendering*, 3rd ed., §6.4.7), so both are unbiased as long as their regions hold
 every ray that passes.

@@ -2,7 +2,7 @@
 
 The table it produces, and how it is sampled, is :class:`povlens.pupil.table.PupilTable`;
 the exact probing is :class:`povlens.pupil.prober.PupilProber`.  Frames are those
-of :mod:`povlens.lens.frames` (camera frame, mm, film at z = 0, lens toward +z).
+of :mod:`povlens.lens.coordinates` (camera frame, mm, film at z = 0, lens toward +z).
 Everything relies on the lens being rotationally symmetric about the axis (as
 pbrt does): the region for a film point at radius r and azimuth phi is the region
 for the film point (r, 0) rotated by phi, and that region is symmetric about the

@@ -5,7 +5,7 @@ A lens sample of the ray-field method (the distribution-3 ray meshes of
 y, :func:`povlens.pov.field_mesh.pass_models`), one canonical point q of the unit disc
 and one sub-pixel offset, shared by the tile's pixels.  Film point f takes its own pupil
 point P(f, q) on the pupil table's sampling plane (z = ``plane_z_mm``, camera frame of
-:mod:`povlens.lens.frames`, mm): q mapped onto f's ellipse of
+:mod:`povlens.lens.coordinates`, mm): q mapped onto f's ellipse of
 :mod:`povlens.pupil.field_domain` (:class:`PupilMap`).  The ray of film point f runs from
 f toward P and is traced through the lens.
 

@@ -2,7 +2,7 @@
 
 A field lens sample (:mod:`povlens.pupil.field`) gives every film point the same
 *canonical* point q of the unit disc.  This module maps q, per film point f, onto an
-ellipse of the table's sampling plane (camera frame of :mod:`povlens.lens.frames`, mm)
+ellipse of the table's sampling plane (camera frame of :mod:`povlens.lens.coordinates`, mm)
 that contains f's pass region:
 
     P(f, q) = c(r) e_r + b(r) q + (a(r) - b(r)) (e_r . q) e_r,

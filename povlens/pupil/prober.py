@@ -1,6 +1,6 @@
 """Exact probing of the pass region: which rays from a film point get through the lens.
 
-Camera frame of :mod:`povlens.lens.frames` (mm, film at z = 0, lens toward +z).
+Camera frame of :mod:`povlens.lens.coordinates` (mm, film at z = 0, lens toward +z).
 Rays from the film point (r, 0, 0) are parameterised by where they cross the
 sampling plane z = z_p (see :mod:`povlens.pupil.build`); :class:`PupilProber`
 traces them with the exact tracer and finds the boundary of the region they

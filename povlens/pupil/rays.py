@@ -1,6 +1,6 @@
 """Exact lens rays per pixel and sample, placed in the POV-Ray scene.
 
-Placement (camera frame of :mod:`povlens.lens.frames` -> POV-Ray world)
+Placement (camera frame of :mod:`povlens.lens.coordinates` -> POV-Ray world)
 ------------------------------------------------------------------
 The scene's camera ``location`` is taken as the lens's **entrance-pupil centre**,
 the perspective centre of the real lens, so a pinhole render from ``location``

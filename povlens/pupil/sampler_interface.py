@@ -1,7 +1,7 @@
 """The lens-sampler interface shared by the exit-pupil table and its baselines.
 
 A lens sampler proposes, for film points and points u in [0, 1)^2, rays toward a
-sampling plane z = z_p (camera frame of :mod:`povlens.lens.frames`, mm) with
+sampling plane z = z_p (camera frame of :mod:`povlens.lens.coordinates`, mm) with
 their density and radiometric weight (:class:`LensSample`); whether a ray gets
 through is decided by tracing it.  :func:`finish_sample` turns plane points into
 a :class:`LensSample`, and :class:`SamplerMeasurements` gives every sampler its

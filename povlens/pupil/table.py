@@ -1,7 +1,7 @@
 """The exit-pupil table: for each film radius, the region of the sampling plane
 through which rays from the film get through the lens, and a sampler over it.
 
-Frames are those of :mod:`povlens.lens.frames` (camera frame, mm, film at z = 0,
+Frames are those of :mod:`povlens.lens.coordinates` (camera frame, mm, film at z = 0,
 lens toward +z).  The table is built by :func:`povlens.pupil.build.build_pupil_table`
 (which also explains the sampling plane and how the tolerance sets the knots), and
 stored by :mod:`povlens.pupil.storage`.

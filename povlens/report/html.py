@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from povlens.errors import PovlensError
-from povlens.lens.frames import vertex_z_mm
+from povlens.lens.coordinates import vertex_z_mm
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import LensPrescription, sag_mm
 from povlens.lens.tracer import trace_from_film

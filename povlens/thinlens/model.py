@@ -4,7 +4,7 @@ The model is what POV-Ray's perspective camera with ``focal_blur`` can express:
 a centre of projection, a linear map from film position to the tangent of the
 field angle (no distortion), a circular entrance pupil, and a plane in focus.
 It is fitted to the real lens as follows (camera frame of
-:mod:`povlens.lens.frames`, mm):
+:mod:`povlens.lens.coordinates`, mm):
 
 * **centre of projection** — the entrance-pupil centre, ``z_ep = film distance
   + total track - entrance-pupil position``: object-space chief rays aim at it,

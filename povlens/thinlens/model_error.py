@@ -1,7 +1,7 @@
 """What the thin-lens model of :mod:`povlens.thinlens.model` gets wrong, measured
 with the exact tracer: distortion (pixels), blur-disc size and shape, and
 vignetting, over object depths and film heights (camera frame of
-:mod:`povlens.lens.frames`, mm).
+:mod:`povlens.lens.coordinates`, mm).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Stress tests with hypothesis: random valid lenses and awkward rays through
 povlens.tracer, paraxial agreement, focusing, and fuzzed lens files.
 
-Camera frame of povlens.frames (mm, film at z = 0, +z toward the scene).
+Camera frame of povlens.lens.coordinates (mm, film at z = 0, +z toward the scene).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, assume, event, given, settings, strategies a
 
 from povlens.lens import focus as focus_mod
 from povlens.errors import LensFileError, OpticsError, UsageError
-from povlens.lens.frames import vertex_z_mm
+from povlens.lens.coordinates import vertex_z_mm
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import (AIR, LensPrescription, format_lens, parse_lens_text,
                                   read_lens, sag_mm)

@@ -95,7 +95,7 @@ def test_probe_depth_background_is_inf_and_camera_inside_a_solid_is_measured(tmp
 # ----- povlens report --------------------------------------------------------------------
 
 from povlens.cli import main as cli_main  # noqa: E402
-from povlens.lens.frames import vertex_z_mm  # noqa: E402
+from povlens.lens.coordinates import vertex_z_mm  # noqa: E402
 from povlens.lens.prescription import read_lens, sag_mm  # noqa: E402
 from povlens.report.html import depth_of_field, make_report, surface_hits  # noqa: E402
 from povlens.thinlens.model import EquivalentThinLens  # noqa: E402
@@ -108,7 +108,7 @@ CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory) -> Path:
     """A tiny mesh render of the paper scene (32x24, 2 lens samples)."""
-    from povlens.rendering.samples import render_outdir
+    from povlens.rendering.driver import render_outdir
     out = tmp_path_factory.mktemp("report") / "paper"
     convert(ConvertOptions(scene=str(ROOT / "scenes" / "paper.pov"), lens="dgauss.50mm",
                            focus=4, outdir=str(out), width=32, height=24, samples=2))
