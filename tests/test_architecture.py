@@ -7,7 +7,9 @@ caught wherever it hides.
 from __future__ import annotations
 
 import ast
+import importlib
 import pathlib
+import re
 
 import pytest
 
@@ -191,4 +193,59 @@ def test_sdl_reader_is_used_through_its_front():
            for target, _, line in _imports(m) if target.startswith(inner)]
     bad += [f"benchmarks/{name}:{line} imports {target}"
             for name, target, line in _benchmark_imports() if target.startswith(inner)]
+    assert not bad, "\n".join(bad)
+
+
+# A ``povlens.<module>[.<name>]`` in a docstring (not part of a path or a longer name), and
+# a ``povlens/...py`` path.
+DOTTED_NAME = re.compile(r"(?<![\w./-])povlens(?:\.\w+)+")
+SOURCE_PATH = re.compile(r"(?<![\w./-])povlens/[\w/]+\.py\b")
+
+
+def _docstrings(path: pathlib.Path):
+    """(line, docstring) of the module, classes and functions of the file ``path``."""
+    tree = ast.parse(path.read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            doc = ast.get_docstring(node, clean=False)
+            if doc:
+                yield getattr(node, "lineno", 1), doc
+
+
+def _names_something(name: str) -> bool:
+    """Whether ``name`` is a module of the package or an attribute of one (a dataclass
+    field without a default counts: it is declared, if not a class attribute)."""
+    parts = name.split(".")
+    for i in range(len(parts), 0, -1):
+        module = ".".join(parts[:i])
+        if module in MODULES:
+            break
+    else:
+        return False
+    obj = importlib.import_module(module)
+    for part in parts[i:]:
+        if hasattr(obj, part):
+            obj = getattr(obj, part)
+        else:
+            return part in getattr(obj, "__annotations__", {})
+    return True
+
+
+def test_docstrings_name_existing_modules():
+    """Every ``povlens.<module>[.<name>]`` a docstring (module, class, function) of
+    ``povlens/`` or ``tests/`` names is a module or a module's attribute, and every
+    ``povlens/...py`` path it names exists: a module that moved leaves no stale name
+    behind.  A name followed by ``*`` or ``.*`` (a family of modules) is not checked."""
+    root = PACKAGE.parent
+    bad = []
+    for path in sorted([*PACKAGE.rglob("*.py"), *root.joinpath("tests").rglob("*.py")]):
+        where = path.relative_to(root)
+        for line, doc in _docstrings(path):
+            for m in DOTTED_NAME.finditer(doc):
+                if doc[m.end():m.end() + 2].startswith(("*", ".*")):
+                    continue
+                if not _names_something(m.group(0)):
+                    bad.append(f"{where}:{line} names {m.group(0)}")
+            bad += [f"{where}:{line} names {m.group(0)}" for m in SOURCE_PATH.finditer(doc)
+                    if not root.joinpath(m.group(0)).exists()]
     assert not bad, "\n".join(bad)

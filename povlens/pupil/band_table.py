@@ -6,7 +6,7 @@ little with the wavelength, so the d-line table could miss rays that pass at the
 band's ends and the render would be biased dark there.  The band table is the d-line
 table with each knot's polygon scaled about its centre (``rho`` times a factor >= 1)
 until it holds what passes at the band's ends; the pupils change monotonically with
-the index (:func:`povlens.plan.dispersion_plan.disc_radius_mm`), so the ends bound
+the index (docs/decisions/dispersion.md, "Pupil disc"), so the ends bound
 the band.  Sampling stays uniform over the (larger) region with pdf 1 / area, so the
 estimate stays unbiased; the price is the extra area (the factor squared).
 

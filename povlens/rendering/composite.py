@@ -33,7 +33,7 @@ def accumulate_samples(
     (a generator computing each sample's weights when it is reached).  ``transform``:
     a function applied to each image after its rows and columns are dropped (an
     interleaved field pass puts its pixels in place:
-    :func:`povlens.rendering.field_samples.deinterleave_sample`).
+    :func:`povlens.rendering.field_samples.image_layout`).
     ``channel_weights`` (with ``weight_arrays``): K arrays (3,) multiplying sample
     k's weights per colour channel, f_kc (spectral samples,
     :mod:`povlens.rendering.spectral`); the sums are then per channel, and the

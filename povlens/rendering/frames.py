@@ -14,7 +14,7 @@
   calling the frame's own Makefile and copying its numbered images.
 
 What does not depend on the focus is done once: the scene camera is read once per
-process (:mod:`povlens.pov.scene_camera` memoises it), and ``--method auto``'s depth
+process (:mod:`povlens.pov.sdl.scene_camera` memoises it), and ``--method auto``'s depth
 probe runs for the first frame only (:class:`povlens.plan.probe_reuse.ProbeReuse`).
 The pupil table, film distance, decision and lens samples are per frame.  A frame
 whose image is there and whose options are unchanged is skipped on a re-run; an

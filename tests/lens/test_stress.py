@@ -1,5 +1,5 @@
 """Stress tests with hypothesis: random valid lenses and awkward rays through
-povlens.tracer, paraxial agreement, focusing, and fuzzed lens files.
+povlens.lens.tracer, paraxial agreement, focusing, and fuzzed lens files.
 
 Camera frame of povlens.lens.coordinates (mm, film at z = 0, +z toward the scene).
 """

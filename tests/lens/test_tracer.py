@@ -1,4 +1,4 @@
-"""Properties of the vectorized tracer (povlens.tracer), camera frame, mm."""
+"""Properties of the vectorized tracer (povlens.lens.tracer), camera frame, mm."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""povlens.mesh_camera: ray meshes, wrappers, and renders against POV-Ray's own cameras.
+"""povlens.pov.mesh: ray meshes, wrappers, and renders against POV-Ray's own cameras.
 
 The two render tests are the contract of this layer:
 

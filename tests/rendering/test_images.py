@@ -1,4 +1,4 @@
-"""povlens.images and povlens.composite."""
+"""povlens.util.images and povlens.rendering.composite."""
 
 from __future__ import annotations
 
