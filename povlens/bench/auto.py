@@ -54,7 +54,7 @@ import numpy as np
 
 from povlens.bench.time_error import ROOT, rmse
 from povlens.plan.convert import ConvertOptions
-from povlens.plan.decision import shift_rmse
+from povlens.plan.image_error import shift_rmse
 from povlens.rendering.samples import convert_and_render
 from povlens.util.files import atomic_output, write_text
 from povlens.util.images import read_image

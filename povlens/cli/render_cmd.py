@@ -279,9 +279,9 @@ def _summary(plan: Plan) -> str:
         f"{f.thick_lens_film_distance_mm:.4f} mm)",
         f"equivalent thin lens: hfov {cam.hfov_deg:.3f} deg, pupil "
         f"{m.pupil_diameter_mm:.3f} mm, focal_blur aperture {cam.aperture:.6g}",
-        (f"model error: distortion <= {e['max_distortion_px']:.3f} px, blur size <= "
-         f"{e['max_blur_size_error_px']:.3f} px, illumination >= "
-         f"{e['min_relative_illumination']:.3f} of the centre" if e else
+        (f"model error: distortion <= {e.max_distortion_px:.3f} px, blur size <= "
+         f"{e.max_blur_size_error_px:.3f} px, illumination >= "
+         f"{e.min_relative_illumination:.3f} of the centre" if e is not None else
          "model error: not measured (a pinhole render needs none)"),
         *([f"ray meshes: {plan.field_mesh.grid[0]}x{plan.field_mesh.grid[1]} faces, rays within "
            f"{plan.field_mesh.max_ray_error_px:.3f} px of the exact ones (measured); "

@@ -20,7 +20,7 @@ from povlens.plan.decision import MIN_SAMPLES, model_depths, samples_for_blur
 from povlens.plan.depth_probe import depth_limits
 from povlens.plan.fixed import round_robin_batches
 from povlens.plan.schema import AdaptiveSampling, Plan
-from povlens.thinlens.model_error import measure_model_error
+from povlens.thinlens.model_error import ModelError, measure_model_error
 
 __all__ = ["BAND_ROWS", "ADAPTIVE_MIN_SAMPLES", "real_blur_at", "real_blur_model_error",
            "adaptive_rows", "sample_row_ranges", "limit_samples", "apply_to_plan"]
@@ -30,14 +30,14 @@ __all__ = ["BAND_ROWS", "ADAPTIVE_MIN_SAMPLES", "real_blur_at", "real_blur_model
 BAND_ROWS, ADAPTIVE_MIN_SAMPLES = 8, MIN_SAMPLES
 
 
-def real_blur_at(model_error: dict, model, axial_mm: np.ndarray) -> np.ndarray:
+def real_blur_at(model_error: ModelError, model, axial_mm: np.ndarray) -> np.ndarray:
     """Real spot size (px, equivalent-disc diameter, largest over the field) at
     axial distances ``axial_mm`` from the entrance pupil (inf: the farthest depth
     measured), interpolated in log distance between the depths of
     ``model_error`` (:func:`povlens.thinlens.model_error.measure_model_error`), held
     constant beyond them.  Returns an array of the shape of ``axial_mm``."""
-    z = np.asarray(model_error["object_z_mm"], dtype=float) - model.centre_z_mm
-    real = np.asarray(model_error["blur_real_px"], dtype=float).max(axis=1)
+    z = np.asarray(model_error.object_z_mm, dtype=float) - model.centre_z_mm
+    real = np.asarray(model_error.blur_real_px, dtype=float).max(axis=1)
     order = np.argsort(z)
     z, real = np.log(np.maximum(z[order], 1e-9)), real[order]
     a = np.asarray(axial_mm, dtype=float)
@@ -45,7 +45,7 @@ def real_blur_at(model_error: dict, model, axial_mm: np.ndarray) -> np.ndarray:
     return np.interp(la, z, real)
 
 
-def real_blur_model_error(lens, plan: Plan, model, film, axial_mm: np.ndarray) -> dict:
+def real_blur_model_error(lens, plan: Plan, model, film, axial_mm: np.ndarray) -> ModelError:
     """:func:`povlens.thinlens.model_error.measure_model_error` at depths spanning a depth
     probe's range (``axial_mm`` from the entrance pupil), for :func:`real_blur_at`."""
     near, far, _ = depth_limits(axial_mm)
@@ -59,7 +59,7 @@ def real_blur_model_error(lens, plan: Plan, model, film, axial_mm: np.ndarray) -
 
 def adaptive_rows(model, axial_mm: np.ndarray, film, n_max: int, band_rows: int = BAND_ROWS,
                   n_min: int = ADAPTIVE_MIN_SAMPLES,
-                  model_error: dict | None = None) -> AdaptiveSampling:
+                  model_error: ModelError | None = None) -> AdaptiveSampling:
     """Samples each band of ``band_rows`` image rows needs, from a depth probe.
 
     Per probe pixel the blur b (px of ``film``) at its depth: the thin-lens blur,

@@ -32,10 +32,10 @@ import numpy as np
 from povlens.lens.film import Film
 from povlens.plan.adaptive import adaptive_rows
 from povlens.plan.aperture import AUTO_NOTE, PINHOLE_NOTE, describe
-from povlens.plan.decision import (decide, model_depths, probe_image_error, pupil_cut,
-                                   shift_tilt_cos)
+from povlens.plan.decision import decide, model_depths, pupil_cut, shift_tilt_cos
 from povlens.plan.depth_probe import DepthProbe, ProbeView, axial_depth, depth_limits, start_probe
 from povlens.plan.fixed import run_in_background, start_plan
+from povlens.plan.image_error import probe_image_error
 from povlens.plan.options import povray_options_of
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pupil.illumination import illumination_profile, profile_record

@@ -25,8 +25,8 @@ from povlens.plan.auto import choose_method, measure_depth_map, start_depth_prob
 from povlens.plan.autofocus import pinhole_focus_note, resolve_focus
 from povlens.plan.depth_probe import atmosphere_note, depth_limits, probe_record
 from povlens.plan.dispersion_plan import colour_decision
-from povlens.plan.fixed import (PlanStart, finish_plan, make_plan, make_plan_with_lens,
-                                run_in_background, start_plan)
+from povlens.plan.fixed import (PlanReuse, PlanStart, finish_plan, make_plan,
+                                make_plan_with_lens, run_in_background, start_plan)
 from povlens.plan.options import METHODS, ConvertOptions, with_povray_options_checked
 from povlens.plan.render_folder import write_folder
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
@@ -43,7 +43,7 @@ class _AutoChoice:
     requested: ConvertOptions          # the options as given (method "auto")
     chosen: ConvertOptions             # the decided method and sample count
     start: PlanStart
-    reuse: dict                        # finish_plan keywords: table, model error, version
+    reuse: PlanReuse                   # finish_plan's table, model error and version
     decision: Decision
     adaptive: AdaptiveSampling | None
     early: speculative.EarlySamples | None = None
@@ -106,12 +106,13 @@ def _choose_automatically(opts: ConvertOptions, render_early, cleanup: contextli
     starter = depth_probe or start_depth_probe           # a focus pull's frames share one
     probe_started = run_in_background(lambda: starter(base, start.film, start))
     cleanup.callback(_cancel_probe, probe_started)
-    plan0, table = finish_plan(base, start, version=run_in_background(povray_version))
+    plan0, table = finish_plan(base, start,
+                               PlanReuse(version=run_in_background(povray_version)))
     probe = probe_started()                               # long started by now
     # The chosen method's plan differs from plan0 only in the method, the samples and
     # the batches: same table, same model error.
-    reuse = {"pupil_table": table, "model_error": plan0.model_error,
-             "version": lambda: plan0.povray.version}
+    reuse = PlanReuse(pupil_table=table, model_error=plan0.model_error,
+                      version=lambda: plan0.povray.version)
     guess = speculative.early_guess(opts, plan0) if opts.speculate else "none"
     early = view = None
     # the lens samples first: where they are wanted, they are the critical path
@@ -216,7 +217,7 @@ def convert(opts: ConvertOptions, render_early=None, depth_probe=None) -> Plan:
             opts = choice.chosen
         opts, adaptive, range_info = _adaptive_sampling(opts, choice)
         plan = (make_plan(opts) if choice is None
-                else finish_plan(opts, choice.start, **choice.reuse)[0])
+                else finish_plan(opts, choice.start, choice.reuse)[0])
         if adaptive is not None:
             apply_to_plan(plan, adaptive, opts.batch_size)
         if choice is not None:

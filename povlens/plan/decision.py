@@ -28,12 +28,13 @@ out-of-focus light: a point blurred into a disc of b pixels is, on the real lens
 the pass region of its pixel (the cat's eye off axis, clipped by the rims; the
 pupil's off-axis growth or shift too) scaled to b, where focal_blur draws the axial
 disc.  It is judged in image terms, on the probe's own view of the scene, as the
-vignetting was before: :func:`catseye_rmse` blurs that image at each pixel with
-both kernels -- the pixel's real pass region and the axial one, scaled to the
-pixel's thin-lens blur at the depth the probe measured there -- and the RMSE of
-their difference (what the map leaves out) is a deviation when it is at least the
-RMSE of moving the image by the tolerance (:func:`shift_rmse`, the budget in image
-terms; ``povlens bench --auto`` uses the same definition).  In focus (b = 0) both
+vignetting was before (:mod:`povlens.plan.image_error`): :func:`catseye_rmse` blurs
+that image at each pixel with both kernels -- the pixel's real pass region and the
+axial one, scaled to the pixel's thin-lens blur at the depth the probe measured
+there -- and the RMSE of their difference (what the map leaves out) is a deviation
+when it is at least the RMSE of moving the image by the tolerance
+(:func:`shift_rmse`, the budget in image terms; ``povlens bench --auto`` uses the
+same definition).  In focus (b = 0) both
 kernels are a point: no error, whatever the vignetting.  Without the probe's image
 the cat's eye is judged in pixels, ``b x cut`` over the model's depths and field
 heights (:func:`pupil_cut`, :func:`catseye_px`); without the pupil either, a
@@ -60,23 +61,21 @@ count, so ``povlens render`` can start it while the probe runs
 
 from __future__ import annotations
 
+import dataclasses
+import enum
 import math
 
 import numpy as np
 
-from povlens.lens.film import Film
-from povlens.lens.tracer import trace_from_film
 from povlens.plan.schema import Decision, FocalBlurSettings
-from povlens.pupil.illumination import relative_illumination_map
-from povlens.pupil.monte_carlo import sobol_points
+from povlens.thinlens.model_error import ModelError
 
-__all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "shape_error_px", "vignetting_rmse", "shift_rmse",
-           "probe_image_error", "film_radius_map_mm", "blur_range_px", "model_depths",
-           "samples_for_blur", "pupil_cut", "shift_tilt_cos", "catseye_px", "catseye_rmse",
-           "pixel_blur_mm",
+__all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "Check", "VignettingCheck", "DecisionChecks",
+           "Verdict", "measure_checks", "vignetting_check", "decision_reasons",
+           "decision_numbers", "shape_error_px", "blur_range_px", "model_depths",
+           "samples_for_blur", "pupil_cut", "shift_tilt_cos", "catseye_px",
            "SAMPLES_PER_BLUR_PX", "MIN_SAMPLES", "MAX_SAMPLES", "SAMPLE_RULE",
-           "VIGNETTING_TOLERANCE", "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE",
-           "CATSEYE_SAMPLES", "CATSEYE_RADII"]
+           "VIGNETTING_TOLERANCE", "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE"]
 
 #: Lens samples per pixel of the largest blur diameter: the least that reaches the FLIP
 #: of a 0.5 px move on every measured scene and lens (docs/decisions/exact-images.md).
@@ -85,15 +84,12 @@ MIN_SAMPLES, MAX_SAMPLES = 8, 256
 SAMPLE_RULE = (f"N = ceil({SAMPLES_PER_BLUR_PX:g} b) rounded to the nearest power of two, "
                f"{MIN_SAMPLES}..{MAX_SAMPLES}")
 #: Share of the error budget that what the vignetting map cannot carry (the cat's
-#: eye, :func:`catseye_rmse`) may take before :func:`decide` prefers a minimum mesh
-#: render to a focal_blur the thin lens allows: no focal_blur sample count goes below
-#: that floor (measurements: docs/decisions/planning.md, "Vignetting floor", where it
-#: was the vignetting itself, and "Vignetting applied as a map").
+#: eye, :func:`povlens.plan.image_error.catseye_rmse`) may take before :func:`decide`
+#: prefers a minimum mesh render to a focal_blur the thin lens allows: no focal_blur
+#: sample count goes below that floor (measurements: docs/decisions/planning.md,
+#: "Vignetting floor", where it was the vignetting itself, and "Vignetting applied as
+#: a map").
 VIGNETTING_FLOOR_SHARE = 0.6
-#: Lens samples per probe pixel of :func:`catseye_rmse`'s two kernels, and the film
-#: radii they are traced at (rotated to each pixel's azimuth, linear between radii).
-CATSEYE_SAMPLES = 64
-CATSEYE_RADII = 65
 #: focal_blur sampling of --method auto: POV-Ray's adaptive sampling (sharp pixels stop
 #: at the minimum, so no depth-dependent count is needed; docs/decisions/planning.md).
 FOCAL_BLUR_ADAPTIVE = FocalBlurSettings(min_samples=32, max_samples=256, confidence=0.99,
@@ -207,205 +203,407 @@ def shape_error_px(blur_real_px, elongation) -> np.ndarray:
     return b * (math.sqrt(2.0) * e / np.sqrt(1.0 + e * e) - 1.0)
 
 
-def _catseye_judgement(e: dict, tol: float, wanted: bool, image_error: dict | None,
-                       catseye: dict | None) -> tuple[bool, str, dict]:
-    """Whether what the vignetting map cannot carry rules out focal_blur, the reason
-    text, and its numbers (see the module docstring)."""
-    illum = float(e["min_relative_illumination"])
-    head = (f"vignetting: applied as a map (relative illumination >= {illum:.3f} of the "
-            f"centre, exact from the exit-pupil table)")
-    numbers: dict = {}
+@dataclasses.dataclass(frozen=True)
+class Check:
+    """One deviation from the equivalent thin lens (or from a sharp pinhole view)
+    measured against the error budget.
+
+    Attributes
+    ----------
+    name : what is measured, as its reason line says it (``"pinhole: max distortion"``).
+    value_px : the measured deviation, film pixels.
+    limit_px : the budget it is compared with, film pixels.
+    """
+
+    name: str
+    value_px: float
+    limit_px: float
+
+    @property
+    def passed(self) -> bool:
+        """Whether the deviation is under the budget (``value_px < limit_px``)."""
+        return self.value_px < self.limit_px
+
+
+@dataclasses.dataclass(frozen=True)
+class VignettingCheck:
+    """The lens's vignetting: applied to the views as a map; whether what the map
+    cannot carry, the cat's eye of out-of-focus light, rules out focal_blur.
+
+    Attributes
+    ----------
+    wanted : whether the vignetting is wanted in the image (False: ``--no-vignetting``,
+        never a deviation).
+    min_relative_illumination : the smallest E / E(centre) of the model error.
+    vignetting_rmse : what leaving the vignetting out changes the probe's image by
+        (image RMSE; None: no probe image), for the record.
+    basis : how the cat's eye was judged: ``"image"`` (the probe's image, an RMSE
+        against the RMSE of moving it by the tolerance), ``"pixels"`` (blur x pupil cut
+        against the tolerance), ``"illumination"`` (neither known: the relative
+        illumination against ``1 - VIGNETTING_TOLERANCE``), or ``"not wanted"``.
+    value, limit : what was compared, in the basis's units (image RMSE, film pixels, a
+        fraction of the centre's illumination); NaN when not wanted.
+    deviation : whether the cat's eye rules out focal_blur.
+    tolerance_px : the error budget, film pixels.
+    max_catseye_px : the largest blur x pupil cut over the model error's depths and
+        film heights, pixels (:func:`catseye_px`; None: no pupil cut given).
+    max_pupil_cut : the largest pupil cut (None: no pupil cut given).
+    """
+
+    wanted: bool
+    min_relative_illumination: float
+    vignetting_rmse: float | None
+    basis: str
+    value: float
+    limit: float
+    deviation: bool
+    tolerance_px: float
+    max_catseye_px: float | None = None
+    max_pupil_cut: float | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class DecisionChecks:
+    """What :func:`decide` measured and how each measure compares with the budget.
+
+    Attributes
+    ----------
+    tolerance_px : the error budget, film pixels.
+    near_z_mm, far_z_mm : the scene's depth range, camera-frame z, mm (far may be inf).
+    near_distance_mm, far_distance_mm : the same from the entrance pupil, mm.
+    focus_inside_range : whether the plane in focus lies within the range.
+    blur_near_px, blur_far_px : the thin-lens blur diameter at near and far, pixels.
+    max_model_blur_px : the largest thin-lens blur diameter over the range, pixels.
+    max_real_blur_px : the largest real spot (equivalent-disc diameter) of the model
+        error, pixels.
+    max_shape_error_px : the largest blur shape error (:func:`shape_error_px`), pixels.
+    max_blur_px : the larger of the model's and the real blur, pixels: what the
+        sample count is for.
+    blur_rule_samples : the mesh samples that blur needs (:func:`samples_for_blur`).
+    pinhole : the pinhole view's checks: thin-lens blur, real spot, distortion.
+    focal_blur : focal_blur's geometric checks: distortion, half the blur size error,
+        half the shape error and, with a lens shift, what the tilted disc loses.
+    shift_tilt_deg : the tilt of POV-Ray's ``direction`` with a lens shift, degrees
+        (None: no shift).
+    vignetting : the vignetting and its cat's eye.
+    aperture_shape : a few words on a shaped stop, which focal_blur cannot draw (None:
+        round).
+    vignetting_floor_share : the share of the budget the cat's eye takes in the probe's
+        image (0: not measured or not wanted).
+    image_rmse : the probe image's measures (name, image RMSE) as given, for the record.
+    """
+
+    tolerance_px: float
+    near_z_mm: float
+    far_z_mm: float
+    near_distance_mm: float
+    far_distance_mm: float
+    focus_inside_range: bool
+    blur_near_px: float
+    blur_far_px: float
+    max_model_blur_px: float
+    max_real_blur_px: float
+    max_shape_error_px: float
+    max_blur_px: float
+    blur_rule_samples: int
+    pinhole: tuple[Check, ...]
+    focal_blur: tuple[Check, ...]
+    shift_tilt_deg: float | None
+    vignetting: VignettingCheck
+    aperture_shape: str | None
+    vignetting_floor_share: float
+    image_rmse: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def pinhole_passes(self) -> bool:
+        """Every deviation from a sharp pinhole view is under the budget."""
+        return all(c.passed for c in self.pinhole)
+
+    @property
+    def geometry_passes(self) -> bool:
+        """focal_blur's geometric checks all pass."""
+        return all(c.passed for c in self.focal_blur)
+
+    @property
+    def thin_lens_passes(self) -> bool:
+        """The equivalent thin lens with the vignetting map is within the budget: the
+        geometry passes, the stop is round and the cat's eye is no deviation."""
+        return self.geometry_passes and not self.aperture_shape and not self.vignetting.deviation
+
+    @property
+    def floor_prefers_mesh(self) -> bool:
+        """The cat's eye takes :data:`VIGNETTING_FLOOR_SHARE` of the budget or more while
+        the blur needs only the minimum mesh sample count."""
+        return (self.blur_rule_samples == MIN_SAMPLES
+                and self.vignetting_floor_share >= VIGNETTING_FLOOR_SHARE)
+
+
+class Verdict(enum.Enum):
+    """What :func:`decide` concluded; the method is the value's first word."""
+
+    PINHOLE = "pinhole"                            # every deviation under the budget
+    FOCAL_BLUR = "focal-blur"                      # the equivalent thin lens will do
+    MESH_FLOOR = "mesh: the cat's eye floor"       # ... but its cat's eye floor costs more
+    MESH_CATSEYE = "mesh: the cat's eye"           # the cat's eye is beyond the budget
+    MESH_APERTURE = "mesh: the aperture shape"     # a shaped stop, and visible blur
+    MESH_LENS = "mesh: the real lens"              # the real lens deviates from the thin lens
+
+    @property
+    def method(self) -> str:
+        """The render method: ``pinhole``, ``focal-blur`` or ``mesh``."""
+        return self.value.split(":")[0]
+
+
+def vignetting_check(e: ModelError, tol: float, wanted: bool, image_error: dict | None,
+                     catseye: dict | None) -> VignettingCheck:
+    """Whether what the vignetting map cannot carry rules out focal_blur (the module
+    docstring): judged on the probe's image when it has ``catseye_rmse``, else in
+    pixels with the pupil's cut ``catseye``, else by the relative illumination."""
+    illum = float(e.min_relative_illumination)
+    vig_rmse = None
     if image_error is not None and "vignetting_rmse" in image_error:
-        head += (f"; leaving it out would change the probe's image by RMSE "
-                 f"{image_error['vignetting_rmse']:.3g}")
+        vig_rmse = image_error["vignetting_rmse"]
+    cat_px = cut = None
     if catseye is not None:
-        numbers["max_catseye_px"] = catseye_px(e, catseye)
-        numbers["max_pupil_cut"] = float(np.max(catseye["cut"]))
+        cat_px, cut = catseye_px(e, catseye), float(np.max(catseye["cut"]))
     if not wanted:
-        return False, (head.replace("applied as a map", "not wanted (--no-vignetting)")
-                       + "; not applied, and its cat's eye is not a deviation"), numbers
-    if image_error is not None and "catseye_rmse" in image_error:
-        c, b = image_error["catseye_rmse"], image_error["shift_rmse"]
-        bad = c >= b and c > 0          # a flat image: nothing moves, nothing to judge
-        text = (f"; what the map cannot carry, the cat's-eye shape of out-of-focus light, "
-                f"changes it by RMSE {c:.3g}, {'at least' if bad else 'less than'} the "
-                f"{b:.3g} of a {tol:.3g} px move")
+        basis, value, limit, bad = "not wanted", math.nan, math.nan, False
+    elif image_error is not None and "catseye_rmse" in image_error:
+        basis, value, limit = "image", image_error["catseye_rmse"], image_error["shift_rmse"]
+        bad = value >= limit and value > 0      # a flat image: nothing moves, nothing to judge
     elif catseye is not None:
-        d = numbers["max_catseye_px"]
-        bad = d >= tol
-        text = (f"; what the map cannot carry, the cat's eye of out-of-focus light (blur x "
-                f"pupil cut, up to {numbers['max_pupil_cut']:.3g}), reaches {d:.3g} px "
-                f"{'>=' if bad else '<'} {tol:.3g} px (without the probe's image)")
+        basis, value, limit = "pixels", cat_px, tol
+        bad = value >= limit
     else:
+        basis, value, limit = "illumination", illum, 1.0 - VIGNETTING_TOLERANCE
         bad = illum < 1.0 - VIGNETTING_TOLERANCE
-        text = ("; without the probe's image or the pupil's cut, what the map cannot carry "
-                f"is not known: judged by the relative illumination, "
-                f"{'below' if bad else 'not below'} {1 - VIGNETTING_TOLERANCE:.2f}")
-    if bad:
-        text += ": a deviation"
-    return bad, head + text, numbers
+    return VignettingCheck(bool(wanted), illum, vig_rmse, basis, value, limit, bad, tol,
+                           cat_px, cut)
 
 
-def _numbers(near_z_mm, far_z_mm, model, e: dict, blur: dict, tol: float, vignetting: bool,
-             image_error: dict | None, max_real: float, shape_err: float) -> dict:
-    """The measurements a decision records (units in the keys)."""
-    return {
-        "tolerance_px": tol,
-        "near_z_mm": near_z_mm, "far_z_mm": far_z_mm,
-        "near_distance_mm": near_z_mm - model.centre_z_mm,
-        "far_distance_mm": far_z_mm - model.centre_z_mm,
-        "blur_near_px": blur["near_px"], "blur_far_px": blur["far_px"],
-        "max_model_blur_px": blur["max_px"], "max_real_blur_px": max_real,
-        "max_distortion_px": float(e["max_distortion_px"]),
-        "max_blur_size_error_px": float(e["max_blur_size_error_px"]),
-        "max_elongation": float(e["max_elongation"]), "max_shape_error_px": shape_err,
-        "min_relative_illumination": float(e["min_relative_illumination"]),
-        "vignetting_wanted": bool(vignetting),
-        "vignetting": "applied as a map" if vignetting else "not wanted",
-        **({f"image_{k}": float(v) for k, v in image_error.items()} if image_error else {}),
-        "model_depths_z_mm": list(e.get("object_z_mm", [])),
-        "samples_per_blur_px": SAMPLES_PER_BLUR_PX,
-    }
-
-
-def _aperture_shape_check(aperture_shape: str | None, reasons: list, fb: list) -> None:
-    """A shaped stop rules focal_blur out (it samples a round aperture only)."""
-    if aperture_shape:
-        reasons.append(f"focal-blur: cannot draw the aperture shape ({aperture_shape}); "
-                       f"the blur is visible")
-        fb.append(False)
-
-
-def _focal_blur_checks(check, tol: float, dist: float, size_err: float, shape_err: float,
-                       blur_px: float, shift_tilt_cos: float, numbers: dict) -> list:
+def _focal_blur_checks(e: ModelError, tol: float, shape_err: float, blur_px: float,
+                       shift_tilt_cos: float) -> tuple[tuple[Check, ...], float | None]:
     """focal_blur's geometric checks (distortion, blur size and shape, and with a lens
-    shift the width the tilted disc loses, ``blur_px`` x (1 - cos) / 2): passed flags."""
-    fb = [check("focal-blur: max distortion", dist, tol),
-          check("focal-blur: max blur size error / 2 (the rim moves by half the diameter "
-                "error)", size_err / 2, tol),
-          check("focal-blur: max blur shape error / 2 (the long axis reaches beyond the "
+    shift the width the tilted disc loses, ``blur_px`` x (1 - cos) / 2), and the tilt
+    in degrees (None: no shift)."""
+    fb = [Check("focal-blur: max distortion", float(e.max_distortion_px), tol),
+          Check("focal-blur: max blur size error / 2 (the rim moves by half the diameter "
+                "error)", float(e.max_blur_size_error_px) / 2, tol),
+          Check("focal-blur: max blur shape error / 2 (the long axis reaches beyond the "
                 "disc by half on each side)", shape_err / 2, tol)]
+    tilt_deg = None
     if shift_tilt_cos < 1.0:
         tilt_deg = math.degrees(math.acos(max(-1.0, min(1.0, shift_tilt_cos))))
-        numbers["shift_tilt_deg"] = tilt_deg
-        fb.append(check(f"focal-blur: lens shift: the disc, tilted {tilt_deg:.2g} deg, is "
+        fb.append(Check(f"focal-blur: lens shift: the disc, tilted {tilt_deg:.2g} deg, is "
                         f"narrower along the shift by the blur x (1 - cos) / 2",
                         blur_px * (1.0 - shift_tilt_cos) / 2, tol))
-    return fb
+    return tuple(fb), tilt_deg
 
 
-def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: dict,
+def measure_checks(near_z_mm: float, far_z_mm: float, model, model_error: ModelError,
+                   pixel_pitch_mm: float, tolerance_px: float, vignetting: bool,
+                   image_error: dict | None, catseye: dict | None, aperture_shape: str | None,
+                   shift_tilt_cos: float) -> DecisionChecks:
+    """Everything :func:`decide` compares with the budget (its parameters, in order)."""
+    tol = float(tolerance_px)
+    blur = blur_range_px(model, near_z_mm, far_z_mm, pixel_pitch_mm)
+    e = model_error
+    real = np.asarray(e.blur_real_px, dtype=float)
+    elong = np.asarray(e.elongation, dtype=float)
+    shape_err = float(np.max(shape_error_px(real, elong))) if real.size else 0.0
+    max_real = float(real.max()) if real.size else 0.0
+    b_max = max(blur["max_px"], max_real)
+    pinhole = (Check("pinhole: max thin-lens blur", blur["max_px"], tol),
+               Check("pinhole: max real spot", max_real, tol),
+               Check("pinhole: max distortion", float(e.max_distortion_px), tol))
+    focal_blur, tilt_deg = _focal_blur_checks(e, tol, shape_err, b_max, shift_tilt_cos)
+    floor_share = 0.0
+    if (image_error is not None and vignetting and image_error.get("shift_rmse", 0) > 0
+            and "catseye_rmse" in image_error):
+        floor_share = image_error["catseye_rmse"] / image_error["shift_rmse"]
+    return DecisionChecks(
+        tol, near_z_mm, far_z_mm, near_z_mm - model.centre_z_mm, far_z_mm - model.centre_z_mm,
+        blur["focus_inside_range"], blur["near_px"], blur["far_px"], blur["max_px"], max_real,
+        shape_err, b_max, samples_for_blur(b_max), pinhole, focal_blur, tilt_deg,
+        vignetting_check(e, tol, vignetting, image_error, catseye), aperture_shape, floor_share,
+        tuple((k, float(v)) for k, v in image_error.items()) if image_error else ())
+
+
+def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: ModelError,
            pixel_pitch_mm: float, tolerance_px: float = 0.5, vignetting: bool = True,
            image_error: dict | None = None, catseye: dict | None = None,
-           aperture_shape: str | None = None,
-           shift_tilt_cos: float = 1.0) -> Decision:
+           aperture_shape: str | None = None, shift_tilt_cos: float = 1.0) -> Decision:
     """Choose the render method and its lens samples (pure; see the module docstring).
 
     Parameters
     ----------
     near_z_mm, far_z_mm : the scene's depth range, camera-frame z (mm); far may be inf.
     model : the :class:`~povlens.thinlens.model.EquivalentThinLens`.
-    model_error : :func:`povlens.thinlens.model_error.measure_model_error` measured at
-        depths spanning [near, far].
+    model_error : its error measured at depths spanning [near, far]
+        (:func:`povlens.thinlens.model_error.measure_model_error`).
     pixel_pitch_mm : the film's pixel size.
     tolerance_px : the error budget, film pixels.
-    vignetting : False when the lens's vignetting is not wanted in the image
-        (``--no-vignetting``).
-    image_error : from the depth probe's view of the scene (:func:`probe_image_error`):
-        ``shift_rmse`` (the budget in image terms), ``vignetting_rmse`` (what the map
-        applies, for the record) and ``catseye_rmse`` (what it cannot carry: a
-        deviation when at least ``shift_rmse``).
+    vignetting : False when the lens's vignetting is not wanted (``--no-vignetting``).
+    image_error : the depth probe's view in image terms
+        (:func:`povlens.plan.image_error.probe_image_error`): ``shift_rmse`` (the
+        budget), ``vignetting_rmse`` (for the record), ``catseye_rmse`` (what the map
+        cannot carry: a deviation when at least ``shift_rmse``).
     catseye : :func:`pupil_cut` of the lens's pupil, for the pixel measure when the
         image gives no ``catseye_rmse``.  Without either, a relative illumination
         below ``1 - VIGNETTING_TOLERANCE`` anywhere is a deviation.
-    aperture_shape : a few words on a shaped stop (iris, mask;
-        :func:`povlens.plan.aperture.describe`), which focal_blur cannot draw: with a
-        visible blur the render is mesh.
-    shift_tilt_cos : with a lens shift, cos of the angle between POV-Ray's tilted
-        ``direction`` and the axis (:func:`shift_tilt_cos`): focal_blur's lens disc is
-        perpendicular to that direction, so its blur is this much narrower along the
+    aperture_shape : a few words on a shaped stop (:func:`povlens.plan.aperture.describe`),
+        which focal_blur cannot draw: with a visible blur the render is mesh.
+    shift_tilt_cos : with a lens shift, cos of the tilt of POV-Ray's ``direction``
+        (:func:`shift_tilt_cos`): focal_blur's disc is that much narrower along the
         shift, and half the lost diameter counts against the budget.  1: no shift.
 
     Returns
     -------
     Decision
-        Method, samples, reasons (the conclusion last) and the numbers behind them.
+        Method, samples, reasons (:func:`decision_reasons`, the conclusion last) and the
+        numbers behind them (:func:`decision_numbers`).
     """
-    tol = float(tolerance_px)
-    blur = blur_range_px(model, near_z_mm, far_z_mm, pixel_pitch_mm)
-    e = model_error
-    real = np.asarray(e["blur_real_px"], dtype=float)
-    elong = np.asarray(e["elongation"], dtype=float)
-    shape_err = float(np.max(shape_error_px(real, elong))) if real.size else 0.0
-    max_real = float(real.max()) if real.size else 0.0
-    dist = float(e["max_distortion_px"])
-    size_err = float(e["max_blur_size_error_px"])
-    numbers = _numbers(near_z_mm, far_z_mm, model, e, blur, tol, vignetting, image_error,
-                       max_real, shape_err)
-    catseye_bad, vig_text, vig_numbers = _catseye_judgement(e, tol, vignetting, image_error,
-                                                            catseye)
-    numbers.update(vig_numbers)
-    reasons = []
-
-    def check(name, value, limit, unit="px"):
-        ok = value < limit
-        reasons.append(f"{name} {value:.3g} {unit} {'<' if ok else '>='} {limit:.3g} {unit}")
-        return ok
-
-    reasons.append(f"depth range {numbers['near_distance_mm'] / 1000:.3g} m to "
-                   + ("infinity" if math.isinf(far_z_mm)
-                      else f"{numbers['far_distance_mm'] / 1000:.3g} m")
-                   + " from the entrance pupil; focus "
-                   + ("inside" if blur["focus_inside_range"] else "outside") + " the range")
-    pin = [check("pinhole: max thin-lens blur", blur["max_px"], tol),
-           check("pinhole: max real spot", max_real, tol),
-           check("pinhole: max distortion", dist, tol)]
-    illum = float(e["min_relative_illumination"])
-    reasons.append(f"pinhole: vignetting (relative illumination >= {illum:.3f} of the centre): "
-                   + ("applied as a map, exact: the view has no blur" if vignetting
-                      else "not wanted (--no-vignetting)"))
-    if all(pin):
-        reasons.append("-> pinhole: every deviation from a sharp pinhole view is under the budget"
-                       + ("; the lens's vignetting is applied as a map" if vignetting else ""))
+    checks = measure_checks(near_z_mm, far_z_mm, model, model_error, pixel_pitch_mm,
+                            tolerance_px, vignetting, image_error, catseye, aperture_shape,
+                            shift_tilt_cos)
+    if checks.pinhole_passes:
+        verdict = Verdict.PINHOLE
+    elif checks.thin_lens_passes:
+        verdict = Verdict.MESH_FLOOR if checks.floor_prefers_mesh else Verdict.FOCAL_BLUR
+    elif checks.geometry_passes and not checks.aperture_shape:
+        verdict = Verdict.MESH_CATSEYE
+    elif checks.aperture_shape and checks.geometry_passes and not checks.vignetting.deviation:
+        verdict = Verdict.MESH_APERTURE
+    else:
+        verdict = Verdict.MESH_LENS
+    reasons = decision_reasons(checks, verdict)
+    numbers = decision_numbers(checks, verdict, model_error)
+    if verdict is Verdict.PINHOLE:
         return Decision("pinhole", 1, reasons, numbers)
-    b_max = max(blur["max_px"], max_real)
-    samples = samples_for_blur(b_max)
-    numbers["max_blur_px"] = b_max
-    fb = _focal_blur_checks(check, tol, dist, size_err, shape_err, b_max, shift_tilt_cos, numbers)
-    reasons.append("focal-blur: " + vig_text)
-    _aperture_shape_check(aperture_shape, reasons, fb)
-    floor_share = 0.0
-    if (image_error is not None and vignetting and image_error.get("shift_rmse", 0) > 0
-            and "catseye_rmse" in image_error):
-        floor_share = image_error["catseye_rmse"] / image_error["shift_rmse"]
-    numbers["vignetting_floor_share"] = floor_share
-    fb_ok = all(fb) and not catseye_bad
-    if fb_ok and samples == MIN_SAMPLES and floor_share >= VIGNETTING_FLOOR_SHARE:
-        reasons.append(
-            f"-> mesh: the equivalent thin lens with the vignetting map is within the budget, "
-            f"but what the map cannot carry (the cat's eye) uses {floor_share:.2f} of it "
-            f"(>= {VIGNETTING_FLOOR_SHARE:g}: no focal_blur sample count goes below that "
-            f"error), and the {b_max:.3g} px blur needs only the minimum {MIN_SAMPLES} lens "
-            f"samples, which cost about what the adaptive focal blur does, without the floor")
-        return Decision("mesh", samples, reasons, numbers)
-    if fb_ok:
+    if verdict is Verdict.FOCAL_BLUR:
         fbs = FOCAL_BLUR_ADAPTIVE
-        numbers["blur_rule_samples"] = samples
-        reasons.append("-> focal-blur: the equivalent thin lens is within the budget"
-                       + ("; the lens's vignetting is applied as a map" if vignetting else "")
-                       + f"; POV-Ray's adaptive focal blur, {fbs.min_samples} to "
-                       f"{fbs.max_samples} samples per pixel (confidence {fbs.confidence:g}, "
-                       f"variance {fbs.variance:g}): sharp pixels stop at the minimum, the "
-                       f"{b_max:.3g} px blur would need {samples} mesh samples ({SAMPLE_RULE})")
         return Decision("focal-blur", fbs.max_samples, reasons, numbers, focal_blur=fbs)
-    why = ("the cat's eye of out-of-focus light, which the vignetting map cannot carry, "
-           "is beyond the budget" if all(fb) else
-           f"focal_blur cannot draw the aperture shape ({aperture_shape}) and the blur is "
-           f"visible" if aperture_shape and all(fb[:-1]) and not catseye_bad else
-           "the real lens deviates from the equivalent thin lens beyond the budget")
-    reasons.append(f"-> mesh: {why}; {samples} samples for a {b_max:.3g} px blur "
-                   f"({SAMPLE_RULE})")
-    return Decision("mesh", samples, reasons, numbers)
+    return Decision("mesh", checks.blur_rule_samples, reasons, numbers)
+
+
+def decision_numbers(c: DecisionChecks, verdict: Verdict, e: ModelError) -> dict:
+    """The numbers a decision records (plan.json's ``decision.numbers``; units in the
+    keys): the measures of ``c`` and the extremes of the model error ``e``; past a
+    pinhole verdict also the blur the samples are for, the shift's tilt, the cat's
+    eye's share of the budget and (focal-blur) the mesh samples the blur would need."""
+    v = c.vignetting
+    numbers = {
+        "tolerance_px": c.tolerance_px,
+        "near_z_mm": c.near_z_mm, "far_z_mm": c.far_z_mm,
+        "near_distance_mm": c.near_distance_mm, "far_distance_mm": c.far_distance_mm,
+        "blur_near_px": c.blur_near_px, "blur_far_px": c.blur_far_px,
+        "max_model_blur_px": c.max_model_blur_px, "max_real_blur_px": c.max_real_blur_px,
+        "max_distortion_px": float(e.max_distortion_px),
+        "max_blur_size_error_px": float(e.max_blur_size_error_px),
+        "max_elongation": float(e.max_elongation), "max_shape_error_px": c.max_shape_error_px,
+        "min_relative_illumination": float(e.min_relative_illumination),
+        "vignetting_wanted": v.wanted,
+        "vignetting": "applied as a map" if v.wanted else "not wanted",
+        **{f"image_{k}": x for k, x in c.image_rmse},
+        "model_depths_z_mm": list(e.object_z_mm),
+        "samples_per_blur_px": SAMPLES_PER_BLUR_PX,
+    }
+    if v.max_catseye_px is not None:
+        numbers.update(max_catseye_px=v.max_catseye_px, max_pupil_cut=v.max_pupil_cut)
+    if verdict is Verdict.PINHOLE:
+        return numbers
+    numbers["max_blur_px"] = c.max_blur_px
+    if c.shift_tilt_deg is not None:
+        numbers["shift_tilt_deg"] = c.shift_tilt_deg
+    numbers["vignetting_floor_share"] = c.vignetting_floor_share
+    if verdict is Verdict.FOCAL_BLUR:
+        numbers["blur_rule_samples"] = c.blur_rule_samples
+    return numbers
+
+
+def decision_reasons(c: DecisionChecks, verdict: Verdict) -> list[str]:
+    """The reasons of a decision, one line each: the depth range, the pinhole view's
+    checks and, past a pinhole verdict, focal_blur's; the conclusion last."""
+    far = "infinity" if math.isinf(c.far_z_mm) else f"{c.far_distance_mm / 1000:.3g} m"
+    reasons = [f"depth range {c.near_distance_mm / 1000:.3g} m to {far} from the entrance "
+               f"pupil; focus {'inside' if c.focus_inside_range else 'outside'} the range"]
+    reasons += [_check_text(k) for k in c.pinhole]
+    v = c.vignetting
+    reasons.append(f"pinhole: vignetting (relative illumination >= "
+                   f"{v.min_relative_illumination:.3f} of the centre): "
+                   + ("applied as a map, exact: the view has no blur" if v.wanted
+                      else "not wanted (--no-vignetting)"))
+    if verdict is not Verdict.PINHOLE:
+        reasons += [_check_text(k) for k in c.focal_blur]
+        reasons.append("focal-blur: " + _vignetting_text(v))
+        if c.aperture_shape:
+            reasons.append(f"focal-blur: cannot draw the aperture shape ({c.aperture_shape}); "
+                           f"the blur is visible")
+    reasons.append(_conclusion(c, verdict))
+    return reasons
+
+
+def _check_text(k: Check) -> str:
+    """``name value px < limit px`` (or ``>=``)."""
+    return f"{k.name} {k.value_px:.3g} px {'<' if k.passed else '>='} {k.limit_px:.3g} px"
+
+
+def _vignetting_text(v: VignettingCheck) -> str:
+    """focal_blur's vignetting line: applied as a map, and how its cat's eye was judged."""
+    state = "applied as a map" if v.wanted else "not wanted (--no-vignetting)"
+    text = (f"vignetting: {state} (relative illumination >= {v.min_relative_illumination:.3f} "
+            f"of the centre, exact from the exit-pupil table)")
+    if v.vignetting_rmse is not None:
+        text += (f"; leaving it out would change the probe's image by RMSE "
+                 f"{v.vignetting_rmse:.3g}")
+    if not v.wanted:
+        return text + "; not applied, and its cat's eye is not a deviation"
+    if v.basis == "image":
+        text += (f"; what the map cannot carry, the cat's-eye shape of out-of-focus light, "
+                 f"changes it by RMSE {v.value:.3g}, "
+                 f"{'at least' if v.deviation else 'less than'} the {v.limit:.3g} of a "
+                 f"{v.tolerance_px:.3g} px move")
+    elif v.basis == "pixels":
+        text += (f"; what the map cannot carry, the cat's eye of out-of-focus light (blur x "
+                 f"pupil cut, up to {v.max_pupil_cut:.3g}), reaches {v.value:.3g} px "
+                 f"{'>=' if v.deviation else '<'} {v.limit:.3g} px (without the probe's image)")
+    else:
+        text += ("; without the probe's image or the pupil's cut, what the map cannot carry "
+                 f"is not known: judged by the relative illumination, "
+                 f"{'below' if v.deviation else 'not below'} {v.limit:.2f}")
+    return text + (": a deviation" if v.deviation else "")
+
+
+def _conclusion(c: DecisionChecks, verdict: Verdict) -> str:
+    """The last reason: ``-> method: why``."""
+    as_map = "; the lens's vignetting is applied as a map" if c.vignetting.wanted else ""
+    if verdict is Verdict.PINHOLE:
+        return ("-> pinhole: every deviation from a sharp pinhole view is under the budget"
+                + as_map)
+    if verdict is Verdict.FOCAL_BLUR:
+        fbs = FOCAL_BLUR_ADAPTIVE
+        return ("-> focal-blur: the equivalent thin lens is within the budget" + as_map
+                + f"; POV-Ray's adaptive focal blur, {fbs.min_samples} to "
+                f"{fbs.max_samples} samples per pixel (confidence {fbs.confidence:g}, "
+                f"variance {fbs.variance:g}): sharp pixels stop at the minimum, the "
+                f"{c.max_blur_px:.3g} px blur would need {c.blur_rule_samples} mesh samples "
+                f"({SAMPLE_RULE})")
+    if verdict is Verdict.MESH_FLOOR:
+        return (f"-> mesh: the equivalent thin lens with the vignetting map is within the "
+                f"budget, but what the map cannot carry (the cat's eye) uses "
+                f"{c.vignetting_floor_share:.2f} of it (>= {VIGNETTING_FLOOR_SHARE:g}: no "
+                f"focal_blur sample count goes below that error), and the "
+                f"{c.max_blur_px:.3g} px blur needs only the minimum {MIN_SAMPLES} lens "
+                f"samples, which cost about what the adaptive focal blur does, without the "
+                f"floor")
+    why = {Verdict.MESH_CATSEYE: "the cat's eye of out-of-focus light, which the vignetting "
+                                 "map cannot carry, is beyond the budget",
+           Verdict.MESH_APERTURE: f"focal_blur cannot draw the aperture shape "
+                                  f"({c.aperture_shape}) and the blur is visible",
+           Verdict.MESH_LENS: "the real lens deviates from the equivalent thin lens beyond "
+                              "the budget"}[verdict]
+    return (f"-> mesh: {why}; {c.blur_rule_samples} samples for a {c.max_blur_px:.3g} px "
+            f"blur ({SAMPLE_RULE})")
 
 
 def shift_tilt_cos(shift_mm, image_distance_mm: float) -> float:
@@ -440,226 +638,13 @@ def pupil_cut(profile) -> dict:
     return {"film_radius_mm": r.tolist(), "cut": cut.tolist()}
 
 
-def catseye_px(model_error: dict, catseye: dict) -> float:
+def catseye_px(model_error: ModelError, catseye: dict) -> float:
     """Largest cat's-eye deviation ``b x cut`` (pixels) over the model error's depths
     and film heights: the thin-lens blur at each depth times the pupil cut
     (:func:`pupil_cut`) at each height."""
-    b = np.asarray(model_error["blur_model_px"], dtype=float)        # (D, F)
-    h = np.asarray(model_error["film_height_mm"], dtype=float)        # (F,)
+    b = np.asarray(model_error.blur_model_px, dtype=float)           # (D, F)
+    h = np.asarray(model_error.film_height_mm, dtype=float)          # (F,)
     cut = np.interp(h, catseye["film_radius_mm"], catseye["cut"])
     return float(np.max(b * cut[None, :])) if b.size else 0.0
 
 
-def film_radius_map_mm(film, width_px: int, height_px: int) -> np.ndarray:
-    """(H, W) film radius (mm) of the pixel centres of an image of ``film``'s frame
-    at ``width_px`` x ``height_px`` pixels (the depth probe's size)."""
-    cols = (np.arange(width_px) + 0.5) / width_px - 0.5
-    rows = 0.5 - (np.arange(height_px) + 0.5) / height_px
-    sx, sy = getattr(film, "shift_mm", (0.0, 0.0))          # lens shift (lens.film)
-    return np.hypot(cols[None, :] * film.width_mm + sx, rows[:, None] * film.height_mm + sy)
-
-
-def vignetting_rmse(image: np.ndarray, relative_illumination: np.ndarray) -> float:
-    """Image RMSE of leaving out the lens's vignetting.
-
-    Parameters
-    ----------
-    image : (H, W, C) linear, the view without vignetting (as POV-Ray's pinhole /
-        focal_blur render it).
-    relative_illumination : (H, W) E/E(centre) at each pixel.  The lens's image is
-        ``image x relative_illumination`` (both normalised at the centre).
-
-    Returns
-    -------
-    float
-    """
-    err = image * (1.0 - np.asarray(relative_illumination, dtype=float))[..., None]
-    return float(np.sqrt(np.mean(err ** 2)))
-
-
-def shift_rmse(image: np.ndarray, shift_px: float) -> float:
-    """Image RMSE of moving ``image`` (H, W, C) by ``shift_px`` >= 0 pixels.
-
-    The mean over +x, -x, +y, -y of RMSE(image, image moved), sub-pixel moves by
-    linear interpolation, a border of ``floor(shift_px) + 1`` pixels excluded
-    (where the moved image has no data).  The error budget of ``--tolerance`` in
-    image terms, here and in ``povlens bench --auto`` (on its reference).  An
-    image too small for the border gives 0.
-    """
-    a = np.asarray(image, dtype=np.float64)[..., :3]
-    s = float(shift_px)
-    if not (s >= 0 and math.isfinite(s)):
-        raise ValueError(f"shift_px must be a finite number >= 0, not {shift_px}")
-    k = int(math.floor(s))
-    f = s - k
-    b = k + 1
-    if a.shape[0] <= 2 * b or a.shape[1] <= 2 * b:
-        return 0.0
-    core = a[b:-b, b:-b]
-    out = []
-    for axis in (0, 1):
-        for step in (1, -1):
-            moved = (1 - f) * np.roll(a, step * k, axis=axis) + f * np.roll(a, step * (k + 1),
-                                                                         axis=axis)
-            d = moved[b:-b, b:-b] - core
-            out.append(math.sqrt(float(np.mean(d * d))))
-    return float(np.mean(out))
-
-
-def pixel_blur_mm(model, axial_mm: np.ndarray) -> np.ndarray:
-    """Thin-lens blur diameter (mm on the film) at axial distances ``axial_mm`` (any
-    shape) from the entrance pupil; inf (background) and nan (no depth: emissive,
-    black or clear surfaces) take the limit at infinity."""
-    a = np.asarray(axial_mm, dtype=float)
-    s = model.focus_distance_mm
-    far = model.pupil_diameter_mm * model.image_distance_mm / s if math.isfinite(s) else 0.0
-    out = np.full(a.shape, far)
-    fin = np.isfinite(a) & (a > 0)
-    if fin.any():
-        out[fin] = model.blur_diameter_mm(model.centre_z_mm + a[fin])
-    return out
-
-
-def _bilinear(image: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """``image`` (H, W, C) at fractional pixel positions (any shape, centres at
-    integers), clamped to the edge; returns (..., C)."""
-    h, w = image.shape[:2]
-    r = np.clip(rows, 0.0, h - 1.0)
-    c = np.clip(cols, 0.0, w - 1.0)
-    r0 = np.minimum(np.floor(r).astype(np.int64), max(h - 2, 0))
-    c0 = np.minimum(np.floor(c).astype(np.int64), max(w - 2, 0))
-    fr, fc = (r - r0)[..., None], (c - c0)[..., None]
-    r1, c1 = np.minimum(r0 + 1, h - 1), np.minimum(c0 + 1, w - 1)
-    return ((1 - fr) * ((1 - fc) * image[r0, c0] + fc * image[r0, c1])
-            + fr * ((1 - fc) * image[r1, c0] + fc * image[r1, c1]))
-
-
-def _kernels(table, film_xy: np.ndarray, n_samples: int):
-    """Pupil points (n, S, 2) on the sampling plane and their weights (n, S) for the
-    film points ``film_xy`` (n, 2), and the same for the axis (S, 2), (S,).
-
-    The same ``n_samples`` Sobol' points everywhere, traced (blocked rays weigh 0)
-    at :data:`CATSEYE_RADII` film radii on the +x axis; a film point's kernel is the
-    one of its radius (linear between those, as the sampler's map is continuous in
-    the radius) rotated to its azimuth (the lens is rotationally symmetric)."""
-    u = sobol_points(n_samples, 2, seed=12345)
-    S = u.shape[0]
-    r = np.hypot(film_xy[:, 0], film_xy[:, 1])
-    radii = np.linspace(0.0, max(float(r.max()), 1e-9), CATSEYE_RADII)
-    f = np.zeros((radii.size * S, 2))
-    f[:, 0] = np.repeat(radii, S)
-    s = table.sample(f, np.tile(u, (radii.size, 1)))
-    w = np.zeros(s.weight.shape)
-    ok = np.nonzero(s.valid)[0]
-    if ok.size:
-        passed = trace_from_film(table.lens, table.film_distance_mm, s.film_point[ok],
-                                 s.direction[ok]).passed
-        w[ok] = np.where(passed, s.weight[ok], 0.0)
-    pk = s.pupil_point[:, :2].reshape(radii.size, S, 2)
-    wk = w.reshape(radii.size, S)
-    x = r / radii[-1] * (radii.size - 1)
-    k = np.clip(np.floor(x).astype(np.int64), 0, radii.size - 2)
-    t = np.clip(x - k, 0.0, 1.0)[:, None]
-    p = (1 - t[..., None]) * pk[k] + t[..., None] * pk[k + 1]          # (n, S, 2)
-    wt = (1 - t) * wk[k] + t * wk[k + 1]
-    safe = np.where(r > 0, r, 1.0)
-    c, sn = (np.where(r > 0, film_xy[:, 0] / safe, 1.0)[:, None],
-             np.where(r > 0, film_xy[:, 1] / safe, 0.0)[:, None])
-    rot = np.stack([c * p[..., 0] - sn * p[..., 1], sn * p[..., 0] + c * p[..., 1]], axis=-1)
-    return rot, wt, pk[0], wk[0]
-
-
-def catseye_rmse(image: np.ndarray, film, table, model, axial_mm: np.ndarray,
-                 n_samples: int = CATSEYE_SAMPLES) -> float:
-    """Image RMSE of what the vignetting map cannot carry: the shape of out-of-focus light.
-
-    At each pixel p of ``image`` (the depth probe's view, sharp), the real lens
-    gathers light through its pass region R(p) and focal_blur through the axial
-    disc; with the map both carry the same total, so what differs is the kernel.
-    A pupil point P (sampling plane, mm from the axis) looks at the sharp image
-    ``b(p) P / D0`` away (paraxial defocus; b(p) the thin-lens blur diameter at the
-    depth the probe measured at p, D0 the axial region's width), so
-
-        I_real(p) = sum_k w_k I(p + b P_k / D0) / sum_k w_k,   P_k in R(p),
-        I_blur(p) = the same with the axial region's points,
-
-    (``n_samples`` Sobol' points of the pupil table, traced: weights ``cos^4 / pdf``
-    of the rays that pass), and the result is RMS(I_real - I_blur), the mean over the
-    kernels and their point reflections (in front of the focus the blur is reversed)
-    like :func:`shift_rmse`'s +-x, +-y.  0 where p is in focus or vignetted (black
-    in both), and for a flat image (below 1e-9 of the image's RMS: rounding).
-
-    Parameters
-    ----------
-    image : (h, w, C) linear, the probe's view of ``film``'s frame.
-    film : the plan's film (mm; its pixels only convert the blur).
-    table : the plan's exit-pupil table.
-    model : the equivalent thin lens.
-    axial_mm : (h, w) the probe's axial distances from the entrance pupil (mm; inf
-        background, nan no depth: both blurred as at infinity).
-    n_samples : pupil points per kernel.
-
-    Returns
-    -------
-    float, in the image's units.
-    """
-    img = np.asarray(image, dtype=np.float64)[..., :3]
-    h, w = img.shape[:2]
-    probe = film.resized(film.width_mm, film.height_mm, w, h)
-    fxy = probe.film_points_mm().reshape(-1, 2)
-    p, wt, p0, w0 = _kernels(table, fxy, n_samples)
-    d0 = float(p0[w0 > 0, 0].max() - p0[w0 > 0, 0].min()) if np.any(w0 > 0) else 0.0
-    if not d0 > 0:
-        return 0.0
-    blur = pixel_blur_mm(model, axial_mm).reshape(-1)               # (n,) mm on the film
-    # a film displacement (dx, dy) is an image displacement of (-dx, +dy) / pitch
-    k_col = -(blur / d0) / (film.width_mm / w)
-    k_row = (blur / d0) / (film.height_mm / h)
-    rows = np.repeat(np.arange(h), w).astype(float)
-    cols = np.tile(np.arange(w), h).astype(float)
-    out = []
-    for sign in (1.0, -1.0):
-        def gather(points, weights):
-            rr = rows[:, None] + sign * k_row[:, None] * points[..., 1]
-            cc = cols[:, None] + sign * k_col[:, None] * points[..., 0]
-            v = _bilinear(img, rr, cc)                                # (n, S, C)
-            tot = weights.sum(axis=-1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                g = np.einsum("ns,nsc->nc", weights, v) / tot[:, None]
-            return g, tot > 0
-        real, lit = gather(p, wt)
-        axial, _ = gather(np.broadcast_to(p0, p.shape), np.broadcast_to(w0, wt.shape))
-        diff = np.where(lit[:, None], real - axial, 0.0)
-        out.append(math.sqrt(float(np.mean(diff * diff))))
-    e = float(np.mean(out))
-    # rounding of the two weighted means (a flat image): no error
-    return e if e > 1e-9 * math.sqrt(float(np.mean(img * img))) else 0.0
-
-
-def probe_image_error(image: np.ndarray, film, model_error: dict, tolerance_px: float, *,
-                      profile=None, table=None, model=None, axial_mm=None) -> dict:
-    """The depth probe's view ``image`` (H, W, 3) of ``film``'s frame in image terms.
-
-    Returns
-    -------
-    dict
-        ``shift_rmse``: moving the image by the tolerance (film pixels converted to
-        the probe's); ``vignetting_rmse``: leaving the lens's relative illumination
-        out (the map of ``profile``, :func:`povlens.pupil.illumination.relative_illumination_map`,
-        when given, else ``model_error``'s over film height interpolated at each
-        pixel's radius); with ``table``, ``model`` and ``axial_mm`` (the probe's
-        depths) also ``catseye_rmse`` (:func:`catseye_rmse`: what the map cannot carry).
-    """
-    h, w = image.shape[:2]
-    if profile is not None:
-        ri_map = relative_illumination_map(profile, film.width_mm, film.height_mm, w, h,
-                                           shift_mm=film.shift_mm)
-    else:
-        heights = np.asarray(model_error["film_height_mm"], dtype=float)
-        ri = np.asarray(model_error["relative_illumination"], dtype=float)[0]
-        ri_map = np.interp(film_radius_map_mm(film, w, h), heights, ri)
-    out = {"vignetting_rmse": vignetting_rmse(image, ri_map),
-           "shift_rmse": shift_rmse(image, tolerance_px * w / film.width_px)}
-    if table is not None and model is not None and axial_mm is not None:
-        out["catseye_rmse"] = catseye_rmse(image, film, table, model, axial_mm)
-    return out

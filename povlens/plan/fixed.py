@@ -50,10 +50,10 @@ from povlens.pov.povray_options import PovrayOptions
 from povlens.pov.sdl import ASPECT_TOLERANCE, parse_scene_camera
 from povlens.pupil.storage import cached_pupil_table
 from povlens.thinlens.model import EquivalentThinLens, fit_thin_lens
-from povlens.thinlens.model_error import measure_model_error
+from povlens.thinlens.model_error import ModelError, measure_model_error
 
-__all__ = ["PlanStart", "start_plan", "finish_plan", "make_plan", "make_plan_with_lens",
-           "camera_focus", "film_of", "camera_notes", "round_robin_batches",
+__all__ = ["PlanStart", "start_plan", "PlanReuse", "finish_plan", "make_plan",
+           "make_plan_with_lens", "camera_focus", "film_of", "camera_notes", "round_robin_batches",
            "run_in_background", "MESH_ANTIALIAS_NOTE", "PINHOLE_NOTE"]
 
 #: The note of a pinhole plan, which skips what only the lens's blur needs
@@ -459,8 +459,26 @@ def _antialias_note(opts: ConvertOptions, st: PlanStart) -> str | None:
     return MESH_ANTIALIAS_NOTE.format(option=last)
 
 
-def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_error=None,
-                version: Callable[[], str] = povray_version):
+@dataclasses.dataclass(frozen=True)
+class PlanReuse:
+    """What :func:`finish_plan` takes instead of computing it: parts already known for
+    the same lens, focus and film (they do not depend on the method or the samples).
+
+    Attributes
+    ----------
+    pupil_table : the exit-pupil table (:class:`povlens.pupil.table.PupilTable`; None:
+        OUTDIR/pupil.npz if current, else built and saved there).
+    model_error : the thin-lens model's error
+        (:class:`povlens.thinlens.model_error.ModelError`; None: measured).
+    version : called for POV-Ray's version string (a background lookup may be passed).
+    """
+
+    pupil_table: object | None = None
+    model_error: ModelError | None = None
+    version: Callable[[], str] = povray_version
+
+
+def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReuse()):
     """The plan of ``opts`` from :func:`start_plan`'s part.
 
     Parameters
@@ -468,12 +486,10 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_
     opts : the options ``st`` was started from, with a concrete method.
     st : :func:`start_plan` of ``opts`` (or of options differing only in the method
         and sample count).
-    pupil_table, model_error : already computed for the same lens, focus and film
-        (they do not depend on the method or the samples); default: the table of
-        OUTDIR/pupil.npz if current, else built (and saved there), and the model
-        error measured.  A pinhole plan given neither computes neither: its table
-        is None, its ``model_error`` empty, and :data:`PINHOLE_NOTE` says so.
-    version : called for POV-Ray's version (a background lookup may be passed).
+    reuse : the pupil table, model error and POV-Ray version lookup already known
+        (default: none; see :class:`PlanReuse`).  A pinhole plan given neither table
+        nor model error computes neither: its table is None, its ``model_error`` None
+        (``{}`` in plan.json), and :data:`PINHOLE_NOTE` says so.
 
     Returns
     -------
@@ -485,22 +501,20 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, *, pupil_table=None, model_
     from povlens.pupil.rays import ScenePlacement
     placement = ScenePlacement.at_entrance_pupil(st.location, st.right, st.up, st.forward,
                                                  model.centre_z_mm, st.mm_per_unit)
-    table = pupil_table
+    table, model_error = reuse.pupil_table, reuse.model_error
     # a pinhole render needs neither the exit-pupil table nor the thin-lens model's
     # error (issue 14: ~1 s of a 96x72 render); auto's pinhole keeps what it measured
-    skip = opts.method == "pinhole" and pupil_table is None and model_error is None
-    if skip:
-        model_error = {}
+    skip = opts.method == "pinhole" and table is None and model_error is None
     if table is None and not skip:  # exact vignetting; saved in OUTDIR for the render
         table, _ = cached_pupil_table(Path(opts.outdir) / "pupil.npz", lens,
                                       st.film_distance_mm, film.max_field_radius_mm,
                                       save=Path(opts.outdir).is_dir())
     check_shift_sees_light(film, table, lens.source)
-    if model_error is None:
+    if model_error is None and not skip:
         depths = _standard_depths_mm(model, st.object_distance_mm, p.efl)
         model_error = measure_model_error(lens, st.film_distance_mm, model, film, depths,
                                           pupil_table=table)
-    version = version()
+    version = reuse.version()
     rw, rh, drop = render_size(film.width_px, film.height_px, version)
     plan = Plan(
         inputs=_inputs(opts, st),
@@ -575,7 +589,7 @@ def make_plan_with_lens(opts: ConvertOptions) -> tuple[Plan, LensPrescription]:
     """:func:`make_plan` and the stopped-down lens the plan was derived from."""
     start = start_plan(opts)
     # 'povray --version' (~0.2 s, idle) runs while the pupil table is built
-    plan, _ = finish_plan(opts, start, version=run_in_background(povray_version))
+    plan, _ = finish_plan(opts, start, PlanReuse(version=run_in_background(povray_version)))
     return plan, start.lens
 
 

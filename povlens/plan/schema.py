@@ -29,6 +29,7 @@ from povlens.errors import PovlensError
 from povlens.lens.film import Film
 from povlens.thinlens.model import EquivalentThinLens
 from povlens.util.files import write_text
+from povlens.thinlens.model_error import ModelError
 
 __all__ = ["SCHEMA_VERSION", "PLAN_FILE", "Inputs", "LensSummary", "FocusSolution",
            "CameraPlacement", "PovrayCamera", "PovraySettings", "FocalBlurSettings",
@@ -411,7 +412,8 @@ class Plan:
     """Everything a render folder is rendered from (see the module docstring).
 
     ``model_error`` is :func:`povlens.thinlens.model_error.measure_model_error` at the
-    plan's standard depths (half, once, twice and ten times the focus distance);
+    plan's standard depths (half, once, twice and ten times the focus distance; None:
+    not measured, a pinhole plan's, written as ``{}``);
     ``sink_centre`` the world point (scene units) where the ray mesh parks blocked
     rays; ``batches`` the lens samples of each ``povlens render-batch``;
     ``sample_rows`` the film rows [start, end) of each sample when the sampling
@@ -436,7 +438,7 @@ class Plan:
     placement: CameraPlacement
     thin_lens: EquivalentThinLens
     povray_camera: PovrayCamera
-    model_error: dict
+    model_error: ModelError | None
     povray: PovraySettings
     sink_centre: Vector
     batches: list[list[int]]
@@ -486,7 +488,7 @@ class Plan:
              "placement": dataclasses.asdict(self.placement),
              "thin_lens": self.thin_lens.to_dict(),
              "povray_camera": dataclasses.asdict(self.povray_camera),
-             "model_error": self.model_error,
+             "model_error": {} if self.model_error is None else self.model_error.to_dict(),
              "povray": self.povray.to_dict(),
              "sink_centre": self.sink_centre,
              "batches": self.batches}
@@ -533,7 +535,7 @@ class Plan:
                                          tl["pupil_diameter_mm"], _inf_if_none(tl["focus_z_mm"]),
                                          tl.get("fov_fit_rms_mm", 0.0)),
             povray_camera=PovrayCamera.from_dict(d["povray_camera"]),
-            model_error=dict(d["model_error"]),
+            model_error=ModelError.from_dict(d["model_error"]) if d["model_error"] else None,
             povray=_fields_of(PovraySettings, d["povray"]),
             sink_centre=_vector(d["sink_centre"]),
             batches=[[int(k) for k in b] for b in d["batches"]],

@@ -27,7 +27,7 @@ import numpy as np
 
 from povlens.plan.decision import (FOCAL_BLUR_ADAPTIVE, MIN_SAMPLES, STRONG_VIGNETTING,
                                    shape_error_px)
-from povlens.plan.fixed import PlanStart, finish_plan
+from povlens.plan.fixed import PlanReuse, PlanStart, finish_plan
 from povlens.plan.options import ConvertOptions, povray_options_of
 from povlens.plan.render_folder import focal_blur_text, write_folder
 from povlens.plan.schema import Decision, Plan
@@ -56,8 +56,8 @@ def lens_rules_out_views(opts: ConvertOptions, plan0: Plan) -> bool:
     """
     e = plan0.model_error
     tol = opts.tolerance_px
-    shape = shape_error_px(np.asarray(e["blur_real_px"]), np.asarray(e["elongation"]))
-    return bool(e["max_distortion_px"] >= tol or e["max_blur_size_error_px"] / 2 >= tol
+    shape = shape_error_px(np.asarray(e.blur_real_px), np.asarray(e.elongation))
+    return bool(e.max_distortion_px >= tol or e.max_blur_size_error_px / 2 >= tol
                 or float(np.max(shape)) / 2 >= tol)
 
 
@@ -69,11 +69,11 @@ def vignetting_may_choose_mesh(opts: ConvertOptions, plan0: Plan) -> bool:
     rims cut much of the pupil) and half the largest thin-lens blur at the plan's
     standard depths reaches the budget: whether the cat's eye of out-of-focus light
     is beyond it then depends on where the scene is out of focus, which the depth
-    probe tells (:func:`povlens.plan.decision.catseye_rmse`).
+    probe tells (:func:`povlens.plan.image_error.catseye_rmse`).
     """
     e = plan0.model_error
-    illum = e["min_relative_illumination"]
-    blur = float(np.max(e["blur_model_px"])) if np.size(e["blur_model_px"]) else 0.0
+    illum = e.min_relative_illumination
+    blur = float(np.max(e.blur_model_px)) if np.size(e.blur_model_px) else 0.0
     return bool(opts.vignetting and illum < STRONG_VIGNETTING
                 and 0.5 * blur >= opts.tolerance_px)
 
@@ -97,7 +97,7 @@ def early_guess(opts: ConvertOptions, plan0: Plan) -> str:
         return "mesh"
     e = plan0.model_error      # a shaped stop: focal_blur is out wherever blur shows
     if ((getattr(opts, "aperture_blades", None) or getattr(opts, "aperture_image", None))
-            and np.size(e["blur_model_px"]) and np.max(e["blur_model_px"]) >= opts.tolerance_px):
+            and np.size(e.blur_model_px) and np.max(e.blur_model_px) >= opts.tolerance_px):
         return "mesh"
     if vignetting_may_choose_mesh(opts, plan0):
         return "either"
@@ -163,7 +163,7 @@ class EarlySamples:
     render: object
 
 
-def start_early_samples(opts: ConvertOptions, start: PlanStart, reuse: dict, table,
+def start_early_samples(opts: ConvertOptions, start: PlanStart, reuse: PlanReuse, table,
                         render_early: Callable) -> EarlySamples:
     """Write the provisional mesh plan of an auto conversion whose lens rules out the
     views (or may), and start rendering it with ``render_early(plan, lens, table)``.
@@ -172,14 +172,14 @@ def start_early_samples(opts: ConvertOptions, start: PlanStart, reuse: dict, tab
     ----------
     opts : the auto conversion's options.
     start : its :class:`~povlens.plan.fixed.PlanStart`.
-    reuse : :func:`~povlens.plan.fixed.finish_plan` keywords: the pupil table,
-        model error and POV-Ray version already known.
+    reuse : the pupil table, model error and POV-Ray version already known
+        (:class:`~povlens.plan.fixed.PlanReuse`).
     table : the exit-pupil table, for the render.
     render_early : starts the render of a plan (see :func:`povlens.plan.convert.convert`).
     """
     n = MIN_SAMPLES if opts.auto_samples else opts.samples
     eopts = dataclasses.replace(opts, method="mesh", samples=n)
-    plan = finish_plan(eopts, start, **reuse)[0]
+    plan = finish_plan(eopts, start, reuse)[0]
     plan.record_auto_choice(Decision(
         "mesh", n, ["provisional: the lens alone rules out the pinhole and focal_blur views "
                     "(distortion, blur size or shape), or its cat's eye may; the depth "

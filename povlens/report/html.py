@@ -500,21 +500,21 @@ class _Folder:
     # -- model error --
     def model_error_section(self) -> str:
         me = self.plan.model_error
-        if not me:
+        if me is None:
             return _missing("thin-lens model error", "not in plan.json")
         plt = _plt()
-        h = np.asarray(me["film_height_mm"], dtype=np.float64)
+        h = np.asarray(me.film_height_mm, dtype=np.float64)
         zc = self.plan.thin_lens.centre_z_mm
         mpu = self.plan.mm_per_unit
         units = self.plan.inputs.units
-        depths = [(z - zc) / mpu for z in me["object_z_mm"]]
+        depths = [(z - zc) / mpu for z in me.object_z_mm]
         panels = [("distortion_px", "distortion (px)"),
                   ("blur_size_error_px", "blur size error (px)"),
                   ("elongation", "blur elongation"),
                   ("relative_illumination", "relative illumination")]
         fig, axes = plt.subplots(1, 4, figsize=(13, 3.1))
         for ax, (key, label) in zip(axes, panels):
-            arr = np.asarray(me.get(key, []), dtype=np.float64)
+            arr = np.asarray(getattr(me, key), dtype=np.float64)
             if arr.ndim != 2 or arr.shape[1] != len(h):
                 ax.text(0.5, 0.5, "not recorded", ha="center", transform=ax.transAxes)
                 continue
@@ -525,9 +525,9 @@ class _Folder:
             ax.tick_params(labelsize=7)
         axes[0].legend(fontsize=7, title="object distance", title_fontsize=7)
         fig.tight_layout()
-        summary = [[_esc(k.replace("_", " ")), _num(me.get(k), ".4g")] for k in
+        summary = [[_esc(k.replace("_", " ")), _num(getattr(me, k), ".4g")] for k in
                    ("max_distortion_px", "max_blur_size_error_px", "max_elongation",
-                    "min_relative_illumination") if k in me]
+                    "min_relative_illumination")]
         return ("<h3>What the thin-lens model gets wrong</h3><p>Measured with the exact "
                 "tracer (plan.json, model_error), over the field along the film diagonal.</p>"
                 + _img(_fig_uri(fig, 100), "model error", "fig")

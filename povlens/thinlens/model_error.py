@@ -6,8 +6,10 @@ vignetting, over object depths and film heights (camera frame of
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import weakref
+from typing import Mapping
 
 import numpy as np
 
@@ -18,7 +20,85 @@ from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_scene
 from povlens.thinlens.model import EquivalentThinLens
 
-__all__ = ["measure_model_error", "measure_model_error_reference", "CHIEF_RAY_MEMO"]
+__all__ = ["ModelError", "measure_model_error", "measure_model_error_reference",
+           "CHIEF_RAY_MEMO"]
+
+
+#: A (D, F) grid of a measure: one row per object depth, one column per film height.
+Grid = tuple[tuple[float, ...], ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelError:
+    """What the thin-lens model gets wrong, measured with the exact tracer
+    (:func:`measure_model_error`) at D object depths x F film heights.
+
+    The fields are in the order of plan.json's ``model_error`` (:meth:`to_dict`).
+
+    Attributes
+    ----------
+    object_z_mm : (D,) the object depths measured at, camera-frame z, mm.
+    film_height_mm : (F,) the film heights measured at, mm from the axis along the
+        film diagonal, 0 to the frame's farthest corner.
+    max_distortion_px : the largest of ``distortion_px``, film pixels.
+    max_blur_size_error_px : the largest of ``blur_size_error_px``, film pixels.
+    max_elongation : the largest of ``elongation`` (1: every spot round).
+    min_relative_illumination : the smallest of ``relative_illumination`` (E / E(axis)).
+    max_vignetting_error : ``1 - min_relative_illumination``, what the model's
+        uniform illumination gets wrong at most (a fraction of the axis's).
+    distortion_px : (D, F) how far the real spot's centroid lies from the model's image
+        point, film pixels (0 where fewer than 3 rays pass).
+    blur_real_px : (D, F) the real spot's equivalent-disc diameter, 2 sqrt(2) x its RMS
+        radius, film pixels (0 where fewer than 3 rays pass).
+    blur_model_px : (D, F) the model's blur-disc diameter, film pixels (one value per depth).
+    elongation : (D, F) the real spot's sqrt(l_max / l_min) of its covariance (1: round,
+        or fewer than 3 rays).
+    relative_illumination : (D, F) E(h) / E(0): from the exit-pupil table when the
+        measurement had one (one value per film height), else the fraction of the bundle
+        that passes relative to the axis's.
+    blur_size_error_px : (D, F) ``|blur_real_px - blur_model_px|``, film pixels.
+    """
+
+    object_z_mm: tuple[float, ...]
+    film_height_mm: tuple[float, ...]
+    max_distortion_px: float
+    max_blur_size_error_px: float
+    max_elongation: float
+    min_relative_illumination: float
+    max_vignetting_error: float
+    distortion_px: Grid
+    blur_real_px: Grid
+    blur_model_px: Grid
+    elongation: Grid
+    relative_illumination: Grid
+    blur_size_error_px: Grid
+
+    def to_dict(self) -> dict:
+        """plan.json's ``model_error``: every field in order, the grids as lists of rows."""
+        return {f.name: _as_lists(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ModelError":
+        """The record of a :meth:`to_dict` (plan.json's ``model_error``; ``null``, which
+        plan.json writes for NaN, reads as NaN).  KeyError if a field is missing."""
+        return cls(**{f.name: _as_tuples(d[f.name]) for f in dataclasses.fields(cls)})
+
+
+def _as_lists(v):
+    """``v`` with its tuples (nested too) as lists: JSON's shape."""
+    return [_as_lists(x) for x in v] if isinstance(v, (tuple, list)) else v
+
+
+def _as_tuples(v):
+    """``v`` read from JSON: lists (nested too) as tuples, ``None`` as NaN."""
+    if isinstance(v, (tuple, list)):
+        return tuple(_as_tuples(x) for x in v)
+    return math.nan if v is None else v
+
+
+def _grid(a: np.ndarray) -> Grid:
+    """A (D, F) array as a :data:`Grid` of Python floats."""
+    return tuple(tuple(row) for row in a.tolist())
 
 
 #: Chief rays of the model-error field heights, per lens object (by identity:
@@ -68,7 +148,7 @@ def _bundle_geometry(lens, film_distance_mm, model, film, object_z_mm, n_field, 
 
 def measure_model_error(lens: LensPrescription, film_distance_mm: float,
                         model: EquivalentThinLens, film: Film, object_z_mm,
-                        n_field: int = 9, n_rings: int = 12, pupil_table=None) -> dict:
+                        n_field: int = 9, n_rings: int = 12, pupil_table=None) -> ModelError:
     """What the thin-lens model gets wrong, measured with the exact tracer.
 
     For object points at depths ``object_z_mm`` (camera-frame z) placed where
@@ -102,19 +182,47 @@ def measure_model_error(lens: LensPrescription, film_distance_mm: float,
 
     Returns
     -------
-    dict
-        Per-(depth, field) lists (D, F): ``distortion_px``, ``blur_real_px``,
-        ``blur_model_px``, ``blur_size_error_px``, ``elongation``,
-        ``relative_illumination``; their extremes (``max_distortion_px``,
-        ``max_blur_size_error_px``, ``max_elongation``,
-        ``min_relative_illumination``, ``max_vignetting_error``); and the
-        ``object_z_mm`` (D,) and ``film_height_mm`` (F,) they were measured at.
+    ModelError
+        The (D, F) grids of each measure, their extremes, and the depths and film
+        heights they were measured at.
     """
     pitch, depths, hs, diag_dir, disc, ep_z, centres = _bundle_geometry(
         lens, film_distance_mm, model, film, object_z_mm, n_field, n_rings)
-    m = len(disc)
-    nd, nf = len(depths), n_field
     target_film = -hs[:, None] * diag_dir[None, :]            # (F, 2) model image points
+    ok, xy = _trace_bundles(lens, film_distance_mm, model, depths, target_film, disc, ep_z,
+                            centres)
+    cnt, c, ev = _spot_moments(ok, xy)
+    spot = cnt >= 3
+    model_blur = model.blur_diameter_mm(depths) / pitch       # (D,)
+    nd, nf = len(depths), n_field
+    out = {
+        "distortion_px": np.where(spot, np.hypot(*np.moveaxis(c - target_film[None], -1, 0))
+                                  / pitch, 0.0),
+        "blur_real_px": np.where(spot, 2 * math.sqrt(2) * np.sqrt(ev.sum(axis=-1)) / pitch, 0.0),
+        "blur_model_px": np.broadcast_to(model_blur[:, None], (nd, nf)).astype(np.float64),
+    }
+    with np.errstate(all="ignore"):
+        elong = np.where(ev[..., 0] > 0, np.sqrt(ev[..., 1] / ev[..., 0]), 1.0)
+    out["elongation"] = np.where(spot, elong, 1.0)
+    if pupil_table is not None:
+        ri = _table_relative_illumination(pupil_table, hs)
+        out["relative_illumination"] = np.broadcast_to(ri[None, :], (nd, nf)).copy()
+    else:
+        frac = cnt / len(disc)
+        out["relative_illumination"] = frac / max(float(frac[0, 0]), 1e-300)
+    out["blur_size_error_px"] = np.abs(out["blur_real_px"] - out["blur_model_px"])
+    return _model_error_summary(depths, hs, out)
+
+
+def _trace_bundles(lens, film_distance_mm, model, depths, target_film, disc, ep_z, centres):
+    """Trace every (depth, film height) bundle of :func:`measure_model_error` in one call.
+
+    The object point of depth d and film height h lies along the direction the model
+    images at ``target_film`` (F, 2); its bundle aims at the pupil disc points ``disc``
+    (M, 2) moved to ``centres`` (F, 2) on the plane z = ``ep_z``.  Returns which rays
+    passed (D, F, M) and where they land on the film (D, F, M, 2; 0 where blocked)."""
+    m = len(disc)
+    nd, nf = len(depths), len(target_film)
     tan = -target_film / model.image_distance_mm              # (F, 2)
     dist = depths - ep_z                                      # (D,)
     obj = np.empty((nd, nf, 3))
@@ -133,39 +241,32 @@ def measure_model_error(lens: LensPrescription, film_distance_mm: float,
     with np.errstate(all="ignore"):
         tt = np.where(ok, -o[..., 2] / d[..., 2], 0.0)
     xy = np.where(ok[..., None], o[..., :2] + tt[..., None] * d[..., :2], 0.0)
+    return ok, xy
+
+
+def _spot_moments(ok: np.ndarray, xy: np.ndarray):
+    """Of each spot (the passing rays ``ok`` (D, F, M) of ``xy`` (D, F, M, 2) on the
+    film): the ray count (D, F), the centroid (D, F, 2) and the eigenvalues of the
+    covariance (D, F, 2; ascending, >= 0)."""
     cnt = ok.sum(axis=-1)                                     # (D, F)
-    frac = cnt / m
-    axis_pass = max(float(frac[0, 0]), 1e-300)
     safe = np.maximum(cnt, 1)[..., None]
     c = xy.sum(axis=2) / safe                                 # (D, F, 2) centroids
     dev = np.where(ok[..., None], xy - c[:, :, None, :], 0.0)
     cov = np.einsum("dfmi,dfmj->dfij", dev, dev) / np.maximum(cnt - 1, 1)[..., None, None]
     ev = np.clip(np.linalg.eigvalsh(cov), 0.0, None)          # ascending, (D, F, 2)
-    spot = cnt >= 3
-    model_blur = model.blur_diameter_mm(depths) / pitch       # (D,)
-    out = {
-        "distortion_px": np.where(spot, np.hypot(*np.moveaxis(c - target_film[None], -1, 0))
-                                  / pitch, 0.0),
-        "blur_real_px": np.where(spot, 2 * math.sqrt(2) * np.sqrt(ev.sum(axis=-1)) / pitch, 0.0),
-        "blur_model_px": np.broadcast_to(model_blur[:, None], (nd, nf)).astype(np.float64),
-    }
-    with np.errstate(all="ignore"):
-        elong = np.where(ev[..., 0] > 0, np.sqrt(ev[..., 1] / ev[..., 0]), 1.0)
-    out["elongation"] = np.where(spot, elong, 1.0)
-    if pupil_table is not None:
-        e = np.asarray(pupil_table.irradiance_factor(hs), dtype=np.float64)
-        ri = e / e[0] if e[0] > 0 else np.zeros_like(e)
-        out["relative_illumination"] = np.broadcast_to(ri[None, :], (nd, nf)).copy()
-    else:
-        out["relative_illumination"] = frac / axis_pass
-    out["blur_size_error_px"] = np.abs(out["blur_real_px"] - out["blur_model_px"])
-    return _model_error_summary(depths, hs, out)
+    return cnt, c, ev
+
+
+def _table_relative_illumination(pupil_table, hs: np.ndarray) -> np.ndarray:
+    """E(h) / E(0) at the film heights ``hs`` (F,), exact from the exit-pupil table."""
+    e = np.asarray(pupil_table.irradiance_factor(hs), dtype=np.float64)
+    return e / e[0] if e[0] > 0 else np.zeros_like(e)
 
 
 def measure_model_error_reference(lens: LensPrescription, film_distance_mm: float,
                                   model: EquivalentThinLens, film: Film, object_z_mm,
                                   n_field: int = 9, n_rings: int = 12,
-                                  pupil_table=None) -> dict:
+                                  pupil_table=None) -> ModelError:
     """:func:`measure_model_error` one bundle at a time (the slow, obvious
     reference its vectorized form is tested against).
 
@@ -177,11 +278,10 @@ def measure_model_error_reference(lens: LensPrescription, film_distance_mm: floa
     m = len(disc)
     relative_illumination = None
     if pupil_table is not None:
-        e = np.asarray(pupil_table.irradiance_factor(hs), dtype=np.float64)
-        relative_illumination = e / e[0] if e[0] > 0 else np.zeros_like(e)
+        relative_illumination = _table_relative_illumination(pupil_table, hs)
     out = {k: np.zeros((len(depths), n_field)) for k in
-           ("distortion_px", "blur_real_px", "blur_model_px", "blur_size_error_px",
-            "elongation", "relative_illumination")}
+           ("distortion_px", "blur_real_px", "blur_model_px", "elongation",
+            "relative_illumination")}
     axis_pass = None
     for a, z in enumerate(depths):
         dist = z - ep_z
@@ -219,14 +319,16 @@ def measure_model_error_reference(lens: LensPrescription, film_distance_mm: floa
     return _model_error_summary(depths, hs, out)
 
 
-def _model_error_summary(depths: np.ndarray, hs: np.ndarray, out: dict) -> dict:
-    summary = {
-        "object_z_mm": depths.tolist(), "film_height_mm": hs.tolist(),
-        "max_distortion_px": float(out["distortion_px"].max()),
-        "max_blur_size_error_px": float(out["blur_size_error_px"].max()),
-        "max_elongation": float(out["elongation"].max()),
-        "min_relative_illumination": float(out["relative_illumination"].min()),
-        "max_vignetting_error": float(1.0 - out["relative_illumination"].min()),
-    }
-    summary.update({k: v.tolist() for k, v in out.items()})
-    return summary
+def _model_error_summary(depths: np.ndarray, hs: np.ndarray, out: dict) -> ModelError:
+    """The record of the (D, F) grids ``out`` measured at ``depths`` x ``hs``."""
+    ri = out["relative_illumination"]
+    return ModelError(
+        object_z_mm=tuple(depths.tolist()), film_height_mm=tuple(hs.tolist()),
+        max_distortion_px=float(out["distortion_px"].max()),
+        max_blur_size_error_px=float(out["blur_size_error_px"].max()),
+        max_elongation=float(out["elongation"].max()),
+        min_relative_illumination=float(ri.min()),
+        max_vignetting_error=float(1.0 - ri.min()),
+        distortion_px=_grid(out["distortion_px"]), blur_real_px=_grid(out["blur_real_px"]),
+        blur_model_px=_grid(out["blur_model_px"]), elongation=_grid(out["elongation"]),
+        relative_illumination=_grid(ri), blur_size_error_px=_grid(out["blur_size_error_px"]))

@@ -46,6 +46,80 @@ def _max(a: float, b: float) -> float:
     return a if a >= b else b
 
 
+@dataclasses.dataclass
+class _BrentSearch:
+    """The state of Brent's bounded search (SciPy's names): the bracket [a, b]; the
+    best point so far ``xf`` and the two before it, ``nfc`` and ``fulc``, with their
+    values; the step before last ``e`` and the last step ``rat``."""
+
+    a: float
+    b: float
+    xf: float
+    fx: float
+    nfc: float
+    fnfc: float
+    fulc: float
+    ffulc: float
+    e: float = 0.0
+    rat: float = 0.0
+
+    def tolerances(self, xatol: float) -> tuple[float, float, float]:
+        """The bracket's midpoint and the tolerances ``tol1``, ``tol2 = 2 tol1``."""
+        xm = 0.5 * (self.a + self.b)
+        tol1 = _SQRT_EPS * abs(self.xf) + xatol / 3.0
+        return xm, tol1, 2.0 * tol1
+
+    def next_point(self, xm: float, tol1: float, tol2: float) -> float:
+        """The point to evaluate next: by a parabola through the three best points
+        when it is acceptable, else by a golden-section step; at least ``tol1`` away."""
+        if not (abs(self.e) > tol1 and self._parabolic_step(xm, tol1, tol2)):
+            self.e = self.a - self.xf if self.xf >= xm else self.b - self.xf
+            self.rat = _GOLDEN_MEAN * self.e
+        return self.xf + (_sign(self.rat) + (self.rat == 0)) * _max(abs(self.rat), tol1)
+
+    def _parabolic_step(self, xm: float, tol1: float, tol2: float) -> bool:
+        """Set ``rat`` to the parabolic step if it falls inside the bracket and is less
+        than half the step before last; False: a golden-section step is due."""
+        xf, fx = self.xf, self.fx
+        r = (xf - self.nfc) * (fx - self.ffulc)
+        q = (xf - self.fulc) * (fx - self.fnfc)
+        p = (xf - self.fulc) * q - (xf - self.nfc) * r
+        q = 2.0 * (q - r)
+        if q > 0.0:
+            p = -p
+        q = abs(q)
+        r = self.e
+        self.e = self.rat
+        if not (abs(p) < abs(0.5 * q * r) and p > q * (self.a - xf) and p < q * (self.b - xf)):
+            return False
+        self.rat = (p + 0.0) / q
+        x = xf + self.rat
+        if (x - self.a) < tol2 or (self.b - x) < tol2:     # too close to a bound
+            self.rat = tol1 * (_sign(xm - xf) + ((xm - xf) == 0))
+        return True
+
+    def take(self, x: float, fu: float) -> None:
+        """Narrow the bracket with the value ``fu`` at ``x`` and keep the best three."""
+        if fu <= self.fx:
+            if x >= self.xf:
+                self.a = self.xf
+            else:
+                self.b = self.xf
+            self.fulc, self.ffulc = self.nfc, self.fnfc
+            self.nfc, self.fnfc = self.xf, self.fx
+            self.xf, self.fx = x, fu
+            return
+        if x < self.xf:
+            self.a = x
+        else:
+            self.b = x
+        if fu <= self.fnfc or self.nfc == self.xf:
+            self.fulc, self.ffulc = self.nfc, self.fnfc
+            self.nfc, self.fnfc = x, fu
+        elif fu <= self.ffulc or self.fulc == self.xf or self.fulc == self.nfc:
+            self.fulc, self.ffulc = x, fu
+
+
 def bounded_minimum(func: Callable[[float], float], lo: float, hi: float, *,
                     xatol: float = 1e-5, maxiter: int = 500) -> BoundedMinimum:
     """The minimum of ``func`` on [``lo``, ``hi``] by Brent's bounded method.
@@ -74,68 +148,21 @@ def bounded_minimum(func: Callable[[float], float], lo: float, hi: float, *,
     if lo > hi:
         raise ValueError("The lower bound exceeds the upper bound.")
     flag = 0
-    a, b = lo, hi
-    fulc = a + _GOLDEN_MEAN * (b - a)
-    nfc, xf = fulc, fulc
-    rat = e = 0.0
-    x = xf
+    x = lo + _GOLDEN_MEAN * (hi - lo)
     fx = func(x)
     num = 1
     fu = math.inf
-    ffulc = fnfc = fx
-    xm = 0.5 * (a + b)
-    tol1 = _SQRT_EPS * abs(xf) + xatol / 3.0
-    tol2 = 2.0 * tol1
-    while abs(xf - xm) > (tol2 - 0.5 * (b - a)):
-        golden = True
-        if abs(e) > tol1:                                 # try a parabolic fit
-            golden = False
-            r = (xf - nfc) * (fx - ffulc)
-            q = (xf - fulc) * (fx - fnfc)
-            p = (xf - fulc) * q - (xf - nfc) * r
-            q = 2.0 * (q - r)
-            if q > 0.0:
-                p = -p
-            q = abs(q)
-            r = e
-            e = rat
-            if abs(p) < abs(0.5 * q * r) and p > q * (a - xf) and p < q * (b - xf):
-                rat = (p + 0.0) / q
-                x = xf + rat
-                if (x - a) < tol2 or (b - x) < tol2:
-                    rat = tol1 * (_sign(xm - xf) + ((xm - xf) == 0))
-            else:
-                golden = True
-        if golden:                                        # a golden-section step
-            e = a - xf if xf >= xm else b - xf
-            rat = _GOLDEN_MEAN * e
-        x = xf + (_sign(rat) + (rat == 0)) * _max(abs(rat), tol1)
+    s = _BrentSearch(lo, hi, x, fx, x, fx, x, fx)
+    xm, tol1, tol2 = s.tolerances(xatol)
+    while abs(s.xf - xm) > (tol2 - 0.5 * (s.b - s.a)):
+        x = s.next_point(xm, tol1, tol2)
         fu = func(x)
         num += 1
-        if fu <= fx:
-            if x >= xf:
-                a = xf
-            else:
-                b = xf
-            fulc, ffulc = nfc, fnfc
-            nfc, fnfc = xf, fx
-            xf, fx = x, fu
-        else:
-            if x < xf:
-                a = x
-            else:
-                b = x
-            if fu <= fnfc or nfc == xf:
-                fulc, ffulc = nfc, fnfc
-                nfc, fnfc = x, fu
-            elif fu <= ffulc or fulc == xf or fulc == nfc:
-                fulc, ffulc = x, fu
-        xm = 0.5 * (a + b)
-        tol1 = _SQRT_EPS * abs(xf) + xatol / 3.0
-        tol2 = 2.0 * tol1
+        s.take(x, fu)
+        xm, tol1, tol2 = s.tolerances(xatol)
         if num >= maxiter:
             flag = 1
             break
-    if math.isnan(xf) or math.isnan(fx) or math.isnan(fu):
+    if math.isnan(s.xf) or math.isnan(s.fx) or math.isnan(fu):
         flag = 2
-    return BoundedMinimum(float(xf), float(fx), num, flag == 0)
+    return BoundedMinimum(float(s.xf), float(s.fx), num, flag == 0)

@@ -176,7 +176,7 @@ def test_shape_error_is_how_far_the_long_axis_reaches_beyond_the_equivalent_disc
 
 def test_vignetting_and_shift_rmse_on_simple_images():
     import numpy as np
-    from povlens.plan.decision import shift_rmse, vignetting_rmse
+    from povlens.plan.image_error import shift_rmse, vignetting_rmse
     img = np.ones((10, 20, 3))
     ri = np.full((10, 20), 0.8)
     assert vignetting_rmse(img, ri) == pytest.approx(0.2)
@@ -219,7 +219,7 @@ def test_probe_renders_the_view_and_the_decision_judges_vignetting_by_it(tmp_pat
     and none on the same scene made dark at the edges."""
     import numpy as np
     from povlens.plan.auto import probe_size, start_depth_probe
-    from povlens.plan.decision import probe_image_error
+    from povlens.plan.image_error import probe_image_error
     from povlens.util.images import read_image
     from povlens.pov.process import render
     out = tmp_path / "o"

@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 
 from povlens.plan.convert import ConvertOptions, convert
-from povlens.plan.decision import catseye_px, catseye_rmse, pupil_cut, shift_rmse
+from povlens.plan.decision import catseye_px, pupil_cut
+from povlens.plan.image_error import catseye_rmse, shift_rmse
 from povlens.plan.fixed import make_plan_with_lens
 from povlens.pupil.illumination import illumination_profile
 from povlens.pupil.storage import cached_pupil_table
+from povlens.thinlens.model_error import ModelError
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "scenes" / "paper.pov")
@@ -48,7 +50,9 @@ def test_pupil_cut_of_the_bundled_lenses(tmp_path):
     assert d["cut"][0] == 0.0 and 0.4 < d["cut"][-1] < 0.6
     assert max(cuts["cooke.triplet.50mm"]["cut"]) < 0.01
     assert cuts["fisheye.10mm"]["cut"][-1] == 1.0
-    e = {"blur_model_px": [[0.0, 0.0], [2.0, 2.0]], "film_height_mm": [0.0, 17.5]}
+    grid = ((0.0, 0.0), (2.0, 2.0))
+    e = ModelError((1e3, 2e3), (0.0, 17.5), 0.0, 0.0, 1.0, 1.0, 0.0, grid, grid, grid, grid,
+                   grid, grid)
     assert catseye_px(e, d) == pytest.approx(2.0 * d["cut"][-1])
 
 

@@ -35,14 +35,14 @@ def test_a_pinhole_plan_builds_no_pupil_table_and_measures_no_model_error(tmp_pa
         pin = convert(_opts(tmp_path, "pin", method="pinhole"))
     out = tmp_path / "pin"
     assert not (out / "pupil.npz").exists()
-    assert pin.model_error == {} and pin.notes == [PINHOLE_NOTE]
+    assert pin.model_error is None and pin.notes == [PINHOLE_NOTE]
     saved = json.loads((out / "plan.json").read_text())
     assert saved["model_error"] == {} and saved["notes"] == [PINHOLE_NOTE]
     assert read_plan(out) == pin                                  # still a valid plan
 
     blur = convert(_opts(tmp_path, "blur", method="focal-blur"))
     assert (tmp_path / "blur" / "pupil.npz").is_file()
-    assert blur.model_error["max_distortion_px"] >= 0 and PINHOLE_NOTE not in blur.notes
+    assert blur.model_error.max_distortion_px >= 0 and PINHOLE_NOTE not in blur.notes
     a, b = pin.to_dict(), blur.to_dict()
     for key in ("lens", "focus", "film", "mm_per_unit", "placement", "thin_lens",
                 "povray_camera", "povray", "sink_centre"):
@@ -61,6 +61,6 @@ def test_the_pinhole_wrapper_is_the_same_as_before_the_skip(tmp_path):
 def test_a_pinhole_chosen_by_auto_keeps_its_measured_model_error(tmp_path):
     plan = convert(_opts(tmp_path, "auto", method="auto", f_number=22.0))
     assert plan.inputs.method == "pinhole", plan.decision.reasons
-    assert plan.model_error["max_distortion_px"] >= 0
+    assert plan.model_error.max_distortion_px >= 0
     assert PINHOLE_NOTE not in plan.notes
     assert (tmp_path / "auto" / "pupil.npz").is_file()

@@ -17,12 +17,14 @@ from povlens.thinlens.model import EquivalentThinLens
 DATA = pathlib.Path(__file__).resolve().parent / "data"
 #: plan.json files written by povlens before plan/schema.py (commit 1347934; scene and
 #: lens paths replaced by /path/to/povlens/): a pinhole plan, an auto plan that chose
-#: focal-blur, and an auto plan that chose an adaptive mesh render.
+#: focal-blur, and an auto plan that chose an adaptive mesh render; and by the release
+#: before the typed model error (commit 3e3d89b, ``plan_v1_release_*``): a pinhole plan
+#: (its model error not measured: ``{}``) and an auto plan that chose focal-blur.
 OLD_PLANS = sorted(p.name for p in DATA.glob("plan_v1_*.json"))
 
 
 def test_the_old_plans_are_there():
-    assert len(OLD_PLANS) == 3
+    assert len(OLD_PLANS) == 5
 
 
 @pytest.mark.parametrize("name", OLD_PLANS)
@@ -182,3 +184,19 @@ def test_the_fog_note_of_a_plan_written_before_notes_moves_to_the_notes(tmp_path
     plan = read_plan(tmp_path)
     assert plan.notes == ["the scene has fog: the depth probe does not see it"]
     assert "scene_atmosphere" not in plan.to_dict()["depth_probe"]
+
+
+def test_the_model_error_is_a_record_or_none_written_as_an_empty_object(tmp_path):
+    """A measured model error reads as a ModelError and writes back key for key; a
+    pinhole plan's, not measured, is ``{}`` in plan.json and None in the plan."""
+    from povlens.thinlens.model_error import ModelError
+    for name in OLD_PLANS:
+        stored = json.loads((DATA / name).read_text())["model_error"]
+        plan = read_plan(DATA / name)
+        if not stored:
+            assert plan.model_error is None
+            assert json.loads(plan_json(plan))["model_error"] == {}
+        else:
+            assert isinstance(plan.model_error, ModelError)
+            assert json.dumps(plan.model_error.to_dict()) == json.dumps(stored)
+    assert read_plan(DATA / "plan_v1_release_pinhole.json").model_error is None

@@ -196,6 +196,7 @@ def test_autofocus_point_of_a_shifted_frame(tmp_path):
 def test_auto_counts_the_tilted_disc_of_focal_blur_against_the_budget(tmp_path):
     """focal_blur's disc is perpendicular to the shifted direction: the decision adds
     half the diameter it loses along the shift, blur x (1 - cos) / 2, to its checks."""
+    import dataclasses
     from povlens.plan.decision import decide, shift_tilt_cos
     r = povlens("convert", CHART, *BASE, *SIZE, "--method", "focal-blur", "--shift-mm", "0,12",
                 "-o", tmp_path / "fb")
@@ -207,9 +208,10 @@ def test_auto_counts_the_tilted_disc_of_focal_blur_against_the_budget(tmp_path):
     assert shift_tilt_cos((0.0, 0.0), 50.0) == 1.0
     # the decision's logic alone: a thin lens that matches the real one exactly (no
     # distortion, size or shape error), a scene from 0.6 m to 1 m, focused at 8 m
-    err = dict(plan.model_error, max_distortion_px=0.0, max_blur_size_error_px=0.0,
-               blur_real_px=np.zeros_like(np.asarray(plan.model_error["blur_real_px"])),
-               elongation=np.ones_like(np.asarray(plan.model_error["elongation"])))
+    err = dataclasses.replace(
+        plan.model_error, max_distortion_px=0.0, max_blur_size_error_px=0.0,
+        blur_real_px=np.zeros_like(np.asarray(plan.model_error.blur_real_px)),
+        elongation=np.ones_like(np.asarray(plan.model_error.elongation)))
     c = plan.thin_lens.centre_z_mm
     kw = dict(near_z_mm=c + 600.0, far_z_mm=c + 1000.0, model=plan.thin_lens, model_error=err,
               pixel_pitch_mm=plan.film.pixel_pitch_mm, vignetting=False)
