@@ -6,10 +6,10 @@
 The same render (mesh method, field meshes, focus 4 m), converted once per sample
 count, is rendered from a copy of that folder (plan, pupil table, wrappers; no samples):
 
-* ``local``: today's pipeline (:func:`povlens.rendering.samples.render_outdir`, all
+* ``local``: today's pipeline (:func:`povlens.rendering.driver.render_outdir`, all
   cores, 4 POV-Ray processes in flight per core);
 * ``LocalCluster 1x1``: Dask's ``LocalCluster``, 1 worker process of 1 thread
-  (:func:`povlens.cluster.render.render_outdir_on_cluster`), default group size (a
+  (:func:`povlens.cluster.client.render_outdir_on_cluster`), default group size (a
   task renders its group with 4 POV-Ray in flight per core) and group size 1;
 * ``scheduler + 2``: a ``dask scheduler`` and two ``dask worker`` processes (no nanny,
   one thread each) started here on 127.0.0.1, reached over TCP, as a cluster is;
@@ -56,10 +56,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from povlens.cluster.bundle import make_bundle                       # noqa: E402
-from povlens.cluster.render import render_outdir_on_cluster         # noqa: E402
+from povlens.cluster.client import render_outdir_on_cluster         # noqa: E402
 from povlens.plan.convert import ConvertOptions, convert            # noqa: E402
 from povlens.plan.schema import read_plan                           # noqa: E402
-from povlens.rendering.samples import composite_outdir, render_outdir  # noqa: E402
+from povlens.rendering.driver import render_outdir  # noqa: E402
+from povlens.rendering.folder_composite import composite_outdir  # noqa: E402
 from povlens.util.images import read_image, write_png_srgb          # noqa: E402
 
 #: Network bandwidth assumed for the estimate (1 Gbit/s Ethernet, bytes per second).

@@ -55,7 +55,7 @@ def _pull(outdir: str, width: int, height: int, frames: int, render: bool) -> li
     if not render:       # the conversions alone: probe, pupil tables, decisions
         from povlens.plan.focus_series import focus_series
         from povlens.plan.options import ConvertOptions
-        from povlens.rendering.frames import convert_frames
+        from povlens.rendering.focus_pull import convert_frames
         values = focus_series((0.8, 5.5), frames)
         return convert_frames(ConvertOptions(scene=SCENE, lens="dgauss.50mm", focus=values[0],
                                              outdir=outdir, method="auto", width=width,

@@ -29,7 +29,8 @@ import tempfile
 from pathlib import Path
 
 from povlens.plan.convert import ConvertOptions, convert
-from povlens.rendering.samples import render_outdir, render_view
+from povlens.rendering.driver import render_outdir
+from povlens.rendering.views import render_view
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "povlens" / "data" / "scenes"

@@ -65,8 +65,10 @@ from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import read_plan
 from povlens.pov.executable import find_povray
 from povlens.rendering.field_samples import write_field_sample
-from povlens.rendering.samples import (composite_outdir, lens_for, pupil_table_for, render_outdir,
-                                       render_view)
+from povlens.rendering.driver import render_outdir
+from povlens.rendering.folder_composite import composite_outdir
+from povlens.rendering.folder_inputs import lens_for, pupil_table_for
+from povlens.rendering.views import render_view
 from povlens.util.images import read_image
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -197,12 +197,12 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         The plan and the paths of ``image.exr`` (linear light) and ``image.png``.
         An interrupted render resumes when called again with the same arguments.
     """
-    from povlens.rendering.samples import convert_and_render
+    from povlens.rendering.driver import convert_and_render
     scheduler = _scheduler_of(scheduler, shared_dir, group_size)
     overrides = _render_overrides(method, samples, width, height, options)
     opts = _options(scene, lens, focus, outdir, overrides)
     if scheduler is not None:
-        from povlens.cluster.render import convert_and_render_on_cluster
+        from povlens.cluster.client import convert_and_render_on_cluster
         plan, exr = convert_and_render_on_cluster(opts, scheduler, shared_dir=shared_dir,
                                                   quiet=not progress, group_size=group_size)
     else:
@@ -227,7 +227,7 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
                   height: int | None = None, jobs: int | None = None, progress: bool = False,
                   scheduler=None, shared_dir: bool = False, group_size: int | None = None,
                   **options) -> FramesResult:
-    """Render a focus pull: one frame per focus distance (:mod:`povlens.rendering.frames`).
+    """Render a focus pull: one frame per focus distance (:mod:`povlens.rendering.focus_pull`).
 
     Parameters are those of :func:`render`, except:
 
@@ -254,7 +254,7 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
     """
     from povlens.errors import ParameterError
     from povlens.plan.focus_series import focus_series
-    from povlens.rendering.frames import render_frames as render_pull
+    from povlens.rendering.focus_pull import render_frames as render_pull
     if not isinstance(focus, (tuple, list)):
         raise ParameterError("focus", focus, f"focus={focus!r}: a focus pull is (A, B) or a "
                              f"list of distances", "for one focus use povlens.render")
@@ -263,7 +263,7 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
     opts = _options(scene, lens, values[0], outdir, overrides)
     scheduler = _scheduler_of(scheduler, shared_dir, group_size)
     if scheduler is not None:
-        from povlens.cluster.render import render_frames_on_cluster
+        from povlens.cluster.client import render_frames_on_cluster
         records = render_frames_on_cluster(opts, values, scheduler, shared_dir=shared_dir,
                                            quiet=not progress, group_size=group_size)
     else:
@@ -288,7 +288,7 @@ def composite(outdir: str | os.PathLike, vignetting: bool | None = None) -> np.n
     numpy.ndarray
         ``(H, W, 3)`` float64, linear light.
     """
-    from povlens.rendering.samples import composite_outdir
+    from povlens.rendering.folder_composite import composite_outdir
     return composite_outdir(outdir, vignetting=vignetting)
 
 

@@ -196,6 +196,63 @@ def test_sdl_reader_is_used_through_its_front():
     assert not bad, "\n".join(bad)
 
 
+#: The module that formats every file name of a render folder (and a focus pull's folder).
+FOLDER_LAYOUT = "povlens.plan.render_folder"
+#: What a render folder's file names look like, formatted or as globs.
+FOLDER_NAMES = re.compile(
+    r"sample_\d|sample_\{|batch_\{|\.weight\.exr|\.mask\.npy|\.transmission\.npy|\.blocked"
+    r"|\.done\b|view-|group_\{|group_\(|exposure\.txt|pupil\.npz|plan\.json|illumination\.json"
+    r"|image\.exr|image\.png|image\.\{|frame-\{|frame-\d|frames\.json|\.timing\.json"
+    r"|pinhole\.pov|focal_blur\.pov|\.speculative-")
+
+
+def _strings(tree: ast.AST) -> list[tuple[int, str]]:
+    """(line, text) of the string literals and f-strings of a module (a formatted value
+    as ``{expression}``), docstrings left out."""
+    docs, parts = set(), set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                docs.add(id(body[0].value))
+        if isinstance(node, ast.JoinedStr):
+            parts.update(id(v) for v in node.values)
+    found = []
+    for node in ast.walk(tree):
+        if id(node) in docs or id(node) in parts:
+            continue
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            found.append((node.lineno, node.value))
+        elif isinstance(node, ast.JoinedStr):
+            found.append((node.lineno, "".join(
+                v.value if isinstance(v, ast.Constant) else "{" + ast.unparse(v.value) + "}"
+                for v in node.values)))
+    return found
+
+
+def _folder_file_names(text: str) -> list[str]:
+    """The words of ``text`` that spell a render folder's file: the whole string when it
+    is one word (a name, a path, a glob), else a word that formats a value into a name
+    or joins one to a path (``{...}``) or globs (``*``).  Prose that mentions a file (a
+    help text's "kept in plan.json") is not a name being made."""
+    words = text.split()
+    return [w for w in words if FOLDER_NAMES.search(w)
+            and (len(words) == 1 or "{" in w or "*" in w)]
+
+
+def test_render_folder_names_in_one_module():
+    """Every file and marker name of a render folder (samples, weights, masks, groups,
+    batches, views, caches, images, a focus pull's frames) is formatted in
+    :mod:`povlens.plan.render_folder`; everything else asks its ``RenderFolder``."""
+    bad = []
+    for module, path in MODULES.items():
+        if module == FOLDER_LAYOUT:
+            continue
+        for line, text in _strings(ast.parse(path.read_text())):
+            bad += [f"{module}:{line}: {name!r}" for name in _folder_file_names(text)]
+    assert not bad, "\n".join(bad)
+
+
 # A ``povlens.<module>[.<name>]`` in a docstring (not part of a path or a longer name), and
 # a ``povlens/...py`` path.
 DOTTED_NAME = re.compile(r"(?<![\w./-])povlens(?:\.\w+)+")

@@ -55,7 +55,8 @@ import numpy as np
 from povlens.bench.time_error import ROOT, rmse
 from povlens.plan.convert import ConvertOptions
 from povlens.plan.image_error import shift_rmse
-from povlens.rendering.samples import convert_and_render
+from povlens.plan.render_folder import RenderFolder
+from povlens.rendering.driver import convert_and_render
 from povlens.util.files import atomic_output, write_text
 from povlens.util.images import read_image
 from povlens.util.resources import SCENE_DIR
@@ -130,7 +131,7 @@ def _render(opts: ConvertOptions, jobs: int) -> tuple[float, np.ndarray, dict]:
     t0 = time.perf_counter()
     plan, _ = convert_and_render(opts, jobs=jobs, quiet=True)   # = povlens render
     seconds = time.perf_counter() - t0
-    return seconds, read_image(Path(opts.outdir) / "image.exr")[..., :3], plan
+    return seconds, read_image(RenderFolder(opts.outdir).image_exr)[..., :3], plan
 
 
 def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]:

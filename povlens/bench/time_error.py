@@ -19,8 +19,8 @@ and channels):
 (e) ``povlens-field``  -- what ``povlens render`` does by default: field meshes, one
     pupil point per sample for the whole frame (:mod:`povlens.rendering.field_samples`).
 
-(a)-(c) and (e) use the same mesh code as ``povlens render`` (:func:`povlens.rendering.samples.render_samples`
-with a sampler and a point override, then :func:`povlens.rendering.samples.composite_outdir`),
+(a)-(c) and (e) use the same mesh code as ``povlens render`` (:func:`povlens.rendering.mesh_samples.render_samples`
+with a sampler and a point override, then :func:`povlens.rendering.folder_composite.composite_outdir`),
 one batch of samples per job, the jobs in parallel.  Timings cover rays, meshes, POV-Ray and compositing; the
 one-off per-lens precomputation (table, pbrt boxes) is reported separately, and
 conversion (``plan.json``) is excluded for every method.  (d) is timed over its
@@ -70,10 +70,13 @@ from pathlib import Path
 import numpy as np
 
 from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import read_plan
 from povlens.pupil.baselines import NaiveRearElement, PbrtBoxes
-from povlens.rendering.samples import (composite_outdir, exposure_for, lens_for, pupil_table_for,
-                                    render_samples, render_view)
+from povlens.rendering.folder_composite import composite_outdir
+from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
+from povlens.rendering.mesh_samples import render_samples
+from povlens.rendering.views import render_view
 from povlens.util.files import atomic_output, write_text
 from povlens.util.images import read_image
 from povlens.util.resources import SCENE_DIR
@@ -159,8 +162,8 @@ def render_mesh(outdir, sampler=None, points=None, jobs: int | None = None) -> n
     sampler : lens sampler for the rays (default: the plan's exit-pupil table).
     points : ``points(k) -> (H, W, 4)`` overriding the plan's Sobol points.
     Batches run ``jobs`` at a time (threads, each driving several POV-Ray
-    processes, as :func:`povlens.rendering.samples.render_samples` does for
-    :func:`povlens.rendering.samples.render_batch`).  Samples already rendered are redone.
+    processes, as :func:`povlens.rendering.mesh_samples.render_samples` does for
+    :func:`povlens.rendering.mesh_samples.render_batch`).  Samples already rendered are redone.
     """
     outdir = Path(outdir)
     plan = read_plan(outdir)
@@ -394,7 +397,7 @@ def run_bench(s: BenchSettings, quiet: bool = False) -> tuple[list[Row], str]:
             }
             info["pbrt_s"] = samplers["pbrt-random"].build_time_s
             info["pbrt_rays"] = s.pbrt_rays
-            cached = [ref_dir / "pupil.npz", ref_dir / "exposure.txt"]
+            cached = [RenderFolder(ref_dir).pupil_npz, RenderFolder(ref_dir).exposure_txt]
             for n in samples:
                 for m in METHODS:
                     _log(f"{lens_name}: {m}, N = {n}", quiet)

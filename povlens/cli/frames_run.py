@@ -1,5 +1,5 @@
 """``povlens convert/render --focus A:B --frames N``: a focus pull, one folder per frame
-(:mod:`povlens.rendering.frames`).  Called by :mod:`povlens.cli.render_cmd`."""
+(:mod:`povlens.rendering.focus_pull`).  Called by :mod:`povlens.cli.render_cmd`."""
 
 from __future__ import annotations
 
@@ -37,32 +37,36 @@ def _printer(quiet: bool):
 
 
 def run_convert_frames(args, opts: ConvertOptions, frames: list[float]) -> int:
-    from povlens.rendering.frames import convert_frames
+    from povlens.rendering.focus_pull import convert_frames
     records = convert_frames(opts, frames)
     if args.json:
         import dataclasses
         print_json({"frames": [dataclasses.asdict(r) for r in records]})
         return 0
     print(_table(records, opts.units))
-    print(f"wrote {args.outdir}/frames.json, {len(records)} frame folders and "
-          f"{args.outdir}/Makefile; render with 'make -C {args.outdir} -j{os.cpu_count() or 1}'")
+    from povlens.plan.render_folder import FramesFolder
+    folder = FramesFolder(args.outdir)
+    print(f"wrote {folder.frames_json}, {len(records)} frame folders and "
+          f"{folder.makefile}; render with 'make -C {args.outdir} -j{os.cpu_count() or 1}'")
     return 0
 
 
 def run_render_frames(args, opts: ConvertOptions, frames: list[float],
                       scheduler: str | None = None) -> int:
     if scheduler is not None:        # every frame's lens samples on one Dask cluster
-        from povlens.cluster.render import render_frames_on_cluster
+        from povlens.cluster.client import render_frames_on_cluster
         records = render_frames_on_cluster(opts, frames, scheduler, shared_dir=args.shared_dir,
                                            quiet=args.quiet, on_plan=_printer(args.quiet),
                                            connect_timeout_s=args.scheduler_timeout,
                                            group_size=args.group_size)
     else:
-        from povlens.rendering.frames import render_frames
+        from povlens.rendering.focus_pull import render_frames
         records = render_frames(opts, frames, jobs=args.jobs, quiet=args.quiet,
                                 on_plan=_printer(args.quiet))
     if not args.quiet:
         print(_table(records, opts.units))
-        print(f"wrote {args.outdir}/image.0001.exr ... image.{len(records):04d}.exr (and .png), "
-              f"{args.outdir}/frames.json")
+        from povlens.plan.render_folder import FramesFolder
+        folder = FramesFolder(args.outdir)
+        print(f"wrote {folder.path / folder.image_name(1, 'exr')} ... "
+              f"{folder.image_name(len(records), 'exr')} (and .png), {folder.frames_json}")
     return 0

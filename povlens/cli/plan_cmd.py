@@ -60,5 +60,6 @@ def run(args) -> int:
             continue
         print(f"  {k:28s} {_fmt(v)}")
     if args.outdir:
-        print(f"wrote {args.outdir}/plan.json; render with 'make -C {args.outdir}'")
+        from povlens.plan.render_folder import RenderFolder
+        print(f"wrote {RenderFolder(args.outdir).plan_json}; render with 'make -C {args.outdir}'")
     return 0

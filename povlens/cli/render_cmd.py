@@ -1,6 +1,6 @@
 """``povlens convert`` / ``render`` / ``composite`` / ``render-batch`` / ``render-view``.
 
-The rendering commands import :mod:`povlens.rendering.samples` when they run: it loads
+The rendering commands import :mod:`povlens.rendering` when they run: it loads
 OpenImageIO and tqdm (~0.3 s), which ``povlens convert`` does not need.
 
 What povlens replaces or ignores of the scene (the plan's ``notes``) is printed once
@@ -309,7 +309,9 @@ def run_convert(args) -> int:
         print_json(plan.to_dict())
     else:
         print(_summary(plan))
-        print(f"wrote {args.outdir}/plan.json and {args.outdir}/Makefile; "
+        from povlens.plan.render_folder import RenderFolder
+        folder = RenderFolder(args.outdir)
+        print(f"wrote {folder.plan_json} and {folder.makefile}; "
               f"render with 'make -C {args.outdir} -j{os.cpu_count() or 1}'")
     return 0
 
@@ -319,7 +321,7 @@ def run_render(args) -> int:
     if frames is not None:                   # a focus pull: one folder per frame
         from povlens.cli.frames_run import run_render_frames
         return run_render_frames(args, options_from_args(args), frames, _scheduler_of(args))
-    from povlens.rendering.samples import convert_and_render
+    from povlens.rendering.driver import convert_and_render
 
     def on_plan(plan: Plan) -> None:
         print_notes(plan)
@@ -327,7 +329,7 @@ def run_render(args) -> int:
 
     scheduler = _scheduler_of(args)
     if scheduler is not None:           # lens samples on a Dask cluster (povlens.cluster)
-        from povlens.cluster.render import convert_and_render_on_cluster
+        from povlens.cluster.client import convert_and_render_on_cluster
         _, out = convert_and_render_on_cluster(
             options_from_args(args), scheduler, shared_dir=args.shared_dir, quiet=args.quiet,
             on_plan=None if args.quiet else on_plan, connect_timeout_s=args.scheduler_timeout,
@@ -341,19 +343,19 @@ def run_render(args) -> int:
 
 
 def run_composite(args) -> int:
-    from povlens.rendering.samples import composite_outdir
+    from povlens.rendering.folder_composite import composite_outdir
     composite_outdir(args.outdir)
     return 0
 
 
 def run_batch(args) -> int:
-    from povlens.rendering.samples import render_batch
+    from povlens.rendering.mesh_samples import render_batch
     render_batch(args.outdir, args.batch, in_flight=args.in_flight)
     return 0
 
 
 def run_view(args) -> int:
-    from povlens.rendering.samples import render_view
+    from povlens.rendering.views import render_view
     render_view(args.outdir, args.view)
     return 0
 

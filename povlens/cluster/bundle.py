@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 from povlens.errors import ParameterError, PovlensError
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 
 __all__ = ["BUNDLE_LIMIT_BYTES", "make_bundle", "replica_root", "in_replica", "remove_replica",
@@ -58,14 +59,13 @@ def _tree_files(folder: Path, outdir: Path) -> list[Path]:
         top_path = Path(top)
         dirs[:] = sorted(d for d in dirs if d not in _SKIP_DIRS
                          and (top_path / d).resolve() != outdir.resolve()
-                         and not (top_path / d / "plan.json").exists())
+                         and not RenderFolder(top_path / d).plan_json.exists())
         files += [top_path / n for n in sorted(names) if (top_path / n).is_file()]
     return files
 
 
 def _render_folder_files(outdir: Path) -> list[Path]:
-    files = [outdir / "plan.json", outdir / "pupil.npz"]
-    files += sorted(outdir.glob("*.pov")) + sorted((outdir / "samples").glob("*.pov"))
+    files = RenderFolder(outdir).worker_inputs()
     missing = [p for p in files if not p.is_file()]
     if missing:
         raise PovlensError(f"{missing[0]} is missing: the render folder is incomplete",
@@ -133,7 +133,7 @@ def in_replica(root: Path, path: str | os.PathLike) -> Path:
 def _rewrite_plan(unpacked: Path, root: Path, outdir: str) -> None:
     """Make the replica's plan (unpacked at ``unpacked``, to be renamed ``root``) name
     the replica's scene, lens and library folders."""
-    path = in_replica(unpacked, outdir) / "plan.json"
+    path = RenderFolder(in_replica(unpacked, outdir)).plan_json
     d = json.loads(path.read_text())
     client = json.loads((unpacked / _PATHS).read_text())
     inp = d["inputs"]

@@ -3,7 +3,7 @@
 :func:`render_group` renders a group of consecutive samples with several POV-Ray
 processes in flight and returns their partial sums (:mod:`povlens.rendering.groups`);
 :func:`render_sample` (group size 1) traces sample k and runs POV-Ray for it with
-:func:`povlens.rendering.samples.render_samples`, exactly as ``povlens render`` does on
+:func:`povlens.rendering.mesh_samples.render_samples`, exactly as ``povlens render`` does on
 one machine, in the worker's replica of the render folder
 (:func:`povlens.cluster.bundle.replica_root`), then returns the sample's files (image,
 pass mask or weights, blocked marker) as bytes.  A sample is fixed by the plan (seed,
@@ -23,24 +23,18 @@ from pathlib import Path
 
 from povlens.cluster.bundle import in_replica, remove_replica, replica_root
 from povlens.errors import PovlensError
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import read_plan
+from povlens.rendering.folder_composite import sample_sums
+from povlens.rendering.folder_inputs import lens_for, pupil_table_for
 from povlens.rendering.groups import GroupSums, pack_group
-from povlens.rendering.samples import (POVRAY_IN_FLIGHT, lens_for, pupil_table_for,
-                                       render_samples, sample_done, sample_sums)
+from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, render_samples
 
-__all__ = ["render_sample", "render_group", "forget_render", "sample_files"]
+__all__ = ["render_sample", "render_group", "forget_render"]
 
 #: Render folder key -> (plan, lens, pupil table): read once per worker process.
 _loaded: dict[str, tuple] = {}
 _loaded_lock = threading.Lock()
-
-
-def sample_files(samples_dir: Path, k: int) -> list[Path]:
-    """The outputs of sample k in a ``samples`` folder: ``sample_KKKK.*`` but the
-    ray mesh and files being written."""
-    prefix = f"sample_{k:04d}."
-    return sorted(p for p in Path(samples_dir).glob(prefix + "*")
-                  if p.is_file() and not p.name.endswith((".inc", ".part")))
 
 
 def _load(key: str, outdir: Path):
@@ -54,7 +48,7 @@ def _load(key: str, outdir: Path):
 
 def _in_flight() -> int:
     """POV-Ray processes a task keeps in flight: the local pipeline's
-    :data:`~povlens.rendering.samples.POVRAY_IN_FLIGHT` per core, shared among the
+    :data:`~povlens.rendering.mesh_samples.POVRAY_IN_FLIGHT` per core, shared among the
     worker's threads (each runs a task)."""
     try:
         cores = len(os.sched_getaffinity(0))
@@ -79,10 +73,10 @@ def _run(job: dict, ks: list[int], group: bool) -> dict:
                                 job["outdir"])
         t_unpack = time.perf_counter() - t0
         plan, lens, table = _load(job["key"] + ("-shared" if job["shared"] else ""), outdir)
-        samples = outdir / "samples"
+        folder = RenderFolder(outdir)
         if not job["shared"]:
             for k in ks:         # an earlier attempt's, on this machine
-                for p in sample_files(samples, k):
+                for p in folder.sample_outputs(k):
                     p.unlink(missing_ok=True)
         in_flight = job.get("in_flight") or _in_flight()
         # the group's partial sums, each sample added here in sample order as soon as
@@ -93,7 +87,7 @@ def _run(job: dict, ks: list[int], group: bool) -> dict:
         def add_ready():
             nonlocal t_sums
             t = time.perf_counter()
-            sums.ready(lambda k: sample_done(outdir, k))
+            sums.ready(folder.sample_done)
             t_sums += time.perf_counter() - t
 
         timing = render_samples(plan, lens, table, outdir, 0, ks,
@@ -105,7 +99,7 @@ def _run(job: dict, ks: list[int], group: bool) -> dict:
             files["group"] = pack_group(ks, *sums.result())
         if not job["shared"]:
             for k in ks:
-                for p in sample_files(samples, k):
+                for p in folder.sample_outputs(k):
                     if not group:
                         files[p.name] = p.read_bytes()
                     p.unlink(missing_ok=True)

@@ -6,6 +6,7 @@ plan's typed records, :func:`~povlens.plan.schema.read_plan` /
 light that fades with distance), ``fixed`` (the plan of a given method), ``autofocus``
 (the focus distance from the scene), ``decision`` (``--method auto``'s pure
 choice), ``adaptive`` (row bands of adaptive mesh sampling), ``auto`` (probe, measure,
-decide), ``render_folder`` (plan.json, wrappers, Makefile), ``speculative`` (what
+decide), ``render_folder`` (the render folder's file names), ``folder_writer``
+(plan.json, wrappers, Makefile), ``speculative`` (what
 ``povlens render`` starts before the decision), ``convert`` (the entry point).
 """

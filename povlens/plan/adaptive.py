@@ -131,7 +131,7 @@ def sample_row_ranges(adaptive: AdaptiveSampling, height: int) -> list[tuple[int
 def apply_to_plan(plan: Plan, adaptive: AdaptiveSampling, batch_size: int | None) -> None:
     """Give ``plan`` the per-sample row ranges of ``adaptive`` and its batches.
 
-    Every sample is its own POV-Ray process (:func:`povlens.rendering.samples.render_samples`),
+    Every sample is its own POV-Ray process (:func:`povlens.rendering.mesh_samples.render_samples`),
     so a batch may mix row ranges; samples are dealt round-robin
     (:func:`~povlens.plan.fixed.round_robin_batches`: later samples render fewer
     rows, so contiguous batches would be unequal)."""

@@ -37,6 +37,7 @@ from povlens.plan.depth_probe import DepthProbe, ProbeView, axial_depth, depth_l
 from povlens.plan.fixed import run_in_background, start_plan
 from povlens.plan.image_error import probe_image_error
 from povlens.plan.options import povray_options_of
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pupil.illumination import illumination_profile, profile_record
 from povlens.pupil.storage import cached_pupil_table
@@ -140,7 +141,7 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     table = pupil_table
     try:
         if table is None:  # exact vignetting; normally saved by the plan
-            table, _ = cached_pupil_table(Path(opts.outdir) / "pupil.npz", lens, fd,
+            table, _ = cached_pupil_table(RenderFolder(opts.outdir).pupil_npz, lens, fd,
                                           film.max_field_radius_mm, save=False)
     except BaseException:
         probe.cancel()

@@ -4,7 +4,7 @@
 (:mod:`povlens.plan.autofocus`: the option, the scene camera's, or measured by the
 depth probe), derives the plan (:mod:`povlens.plan.fixed`; with ``--method auto``
 after measuring the scene and deciding, :mod:`povlens.plan.auto`) and writes OUTDIR
-(:mod:`povlens.plan.render_folder`): ``plan.json``, the POV-Ray wrappers, the
+(:mod:`povlens.plan.folder_writer`): ``plan.json``, the POV-Ray wrappers, the
 exit-pupil table ``pupil.npz`` and a ``Makefile`` (``make -C OUTDIR -j2``
 renders and composites).
 """
@@ -28,7 +28,8 @@ from povlens.plan.dispersion_plan import colour_decision
 from povlens.plan.fixed import (PlanReuse, PlanStart, finish_plan, make_plan,
                                 make_plan_with_lens, run_in_background, start_plan)
 from povlens.plan.options import METHODS, ConvertOptions, with_povray_options_checked
-from povlens.plan.render_folder import write_folder
+from povlens.plan.folder_writer import write_folder
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pov.executable import povray_version
 from povlens.util.resources import resolve_scene_path
@@ -165,7 +166,7 @@ def _keep_speculative_view(view: speculative.SpeculativeView, outdir: Path) -> N
     except BaseException:
         Path(view.out_path).unlink(missing_ok=True)
         raise
-    os.replace(view.out_path, outdir / "view-focal-blur.exr")
+    os.replace(view.out_path, RenderFolder(outdir).view_image("focal-blur"))
 
 
 def convert(opts: ConvertOptions, render_early=None, depth_probe=None) -> Plan:

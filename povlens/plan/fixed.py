@@ -42,6 +42,7 @@ from povlens.lens.prescription import LensPrescription, read_lens
 from povlens.plan.aperture import apply_aperture_shape, inputs_of_shape, shape_of_options
 from povlens.plan.dispersion_plan import apply_dispersion
 from povlens.plan.options import METHODS, ConvertOptions, povray_options_of
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import (CameraPlacement, FocusSolution, Inputs, LensSummary, Plan,
                                  PovrayCamera, PovraySettings)
 from povlens.pov.mesh import default_sink_centre, render_size
@@ -506,7 +507,7 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReus
     # error (issue 14: ~1 s of a 96x72 render); auto's pinhole keeps what it measured
     skip = opts.method == "pinhole" and table is None and model_error is None
     if table is None and not skip:  # exact vignetting; saved in OUTDIR for the render
-        table, _ = cached_pupil_table(Path(opts.outdir) / "pupil.npz", lens,
+        table, _ = cached_pupil_table(RenderFolder(opts.outdir).pupil_npz, lens,
                                       st.film_distance_mm, film.max_field_radius_mm,
                                       save=Path(opts.outdir).is_dir())
     check_shift_sees_light(film, table, lens.source)

@@ -2,7 +2,7 @@
 
 The depth probe of ``--method auto`` (:func:`povlens.plan.auto.start_depth_probe`)
 measures where the scene's surfaces are; that does not depend on the focus.  The
-frames of a pull (:mod:`povlens.rendering.frames`) give each conversion the same
+frames of a pull (:mod:`povlens.rendering.focus_pull`) give each conversion the same
 :class:`ProbeReuse`: the first frame runs the probe, the others get its result.
 (The probe's camera is the first frame's: a focus pull breathes, so the later frames'
 fields of view differ by their breathing, a few per cent at most; the depth range and

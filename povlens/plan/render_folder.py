@@ -1,171 +1,426 @@
-"""Writing a render folder from its plan: plan.json, POV-Ray wrappers, the Makefile.
+"""A render folder's layout: the name of every file and marker in it, and the readers
+of the small files, in one place.
 
-OUTDIR gets
+A render folder (``povlens convert -o OUTDIR``) holds
 
-* ``plan.json`` (:func:`povlens.plan.schema.write_plan`);
-* ``pinhole.pov`` and ``focal_blur.pov``: wrappers that ``#include`` the scene and
-  declare their own camera last (POV-Ray uses the last camera);
-* for the mesh method, ``samples/batch_NNN.pov``: wrappers that render one lens
-  sample each per POV-Ray run (the sample's ray mesh is written just before,
-  :mod:`povlens.rendering.samples`);
-* ``Makefile``: ``make -C OUTDIR -j2`` renders and composites; a second ``make``
-  does nothing.
+=====================================  ==============================================
+``plan.json``                          the plan (:mod:`povlens.plan.schema`)
+``pupil.npz``                          the exit-pupil table (:mod:`povlens.pupil.storage`)
+``pinhole.pov``, ``focal_blur.pov``    the views' wrappers (:mod:`povlens.plan.folder_writer`)
+``Makefile``                           ``make -C OUTDIR -j2`` renders and composites
+``view-<view>.exr``                    a view as POV-Ray rendered it
+``.speculative-focal-blur.pov/.exr``   ``--method auto``'s guessed view, while it runs
+``exposure.txt``                       the composite's exposure 1 / (E/L)(0)
+``illumination.json``                  the relative illumination of a field-mesh composite
+``image.exr``, ``image.png``           the image (linear float; sRGB preview)
+``samples/batch_BBB.pov``              the mesh method's batch wrappers
+``samples/batch_BBB.done``             make's marker: batch b is rendered
+``samples/sample_KKKK.exr``            lens sample k as POV-Ray rendered it
+``samples/sample_KKKK.weight.exr``     its per-pixel radiometric weights (per-pixel meshes)
+``samples/sample_KKKK.mask.npy``       its pass mask (field meshes, bits packed by row)
+``samples/sample_KKKK.transmission.npy``  its mask stop's transmission (grey masks)
+``samples/sample_KKKK.blocked``        marker: every ray of its rows is blocked
+``samples/sample_KKKK.inc``            its ray mesh, while it renders
+``samples/group_K0_K1.npz``            partial sums of samples k0 .. k1-1 (a cluster)
+``samples/*.timing.json``              timings (batches, the render, early samples)
+=====================================  ==============================================
 
-Files whose text is unchanged are left alone (make compares modification
-times), and what an earlier plan rendered that the new one cannot use is removed.
+and a focus pull's folder (:mod:`povlens.rendering.focus_pull`) holds a render folder
+per frame (``frame-NNNN/``), the frames' images ``image.NNNN.exr`` / ``.png``, its
+index ``frames.json`` and a ``Makefile`` (:class:`FramesFolder`).
+
+Every other module gets these names from here (:class:`RenderFolder`), and so do the
+templates (:meth:`RenderFolder.makefile_names`, :meth:`RenderFolder.mesh_include_names`):
+``tests/test_architecture.py`` checks that no other module spells them.
 """
 
 from __future__ import annotations
 
+import io
 import os
-import shlex
-import sys
+import re
 from pathlib import Path
 
+import numpy as np
+
 from povlens.errors import PovlensError
-from povlens.plan.schema import FocalBlurSettings, Plan, read_plan, write_plan
-from povlens.pov.mesh import SINK_RADIUS, focal_blur_wrapper, pinhole_wrapper
-from povlens.pov.sdl import pov_string, pov_vector, read_template
-from povlens.util.files import write_text
+from povlens.util.files import write_bytes, write_text
 
-__all__ = ["write_folder", "write_if_changed", "focal_blur_text", "blur_settings",
-           "stale_samples", "invalidate_outputs", "SAMPLE_INDEPENDENT_INPUTS", "ILLUMINATION_FILE"]
+__all__ = ["PLAN_FILE", "FRAMES_FILE", "VIEWS", "RenderFolder", "FramesFolder"]
 
-#: Plan inputs that do not change what lens sample k renders: the sample count
-#: (scrambled-Sobol point k is the same for any count), how samples are batched,
-#: and how the method and count were chosen.  A change of these keeps rendered
-#: samples whose row range is unchanged.
-SAMPLE_INDEPENDENT_INPUTS = ("samples", "batch_size", "adaptive", "requested_method",
-                             "tolerance_px", "auto_samples")
+#: The plan's file name in a render folder.
+PLAN_FILE = "plan.json"
+#: The index of a focus pull's folder.
+FRAMES_FILE = "frames.json"
+#: The views of a folder and their wrappers (POV-Ray's own cameras).
+VIEWS = {"pinhole": "pinhole.pov", "focal-blur": "focal_blur.pov"}
 
-
-def write_if_changed(path: Path, text: str) -> None:
-    """Write atomically, but leave an identical file alone (make compares mtimes)."""
-    try:
-        if path.read_text() == text:
-            return
-    except OSError:
-        pass
-    write_text(path, text)
-
-
-def _scene_include(plan: Plan, outdir: Path) -> str:
-    return os.path.relpath(plan.inputs.scene, outdir)
+_SAMPLES = "samples"
+_MAKEFILE = "Makefile"
+_SAMPLE_PREFIX = "sample_"
+#: Digits of a sample's number in its file names (the batch templates pad to it too).
+_SAMPLE_DIGITS = 4
+#: A sample's files: image, weights, pass mask, mask transmission, blocked marker, mesh.
+_IMAGE, _WEIGHT, _MASK, _TRANSMISSION, _BLOCKED, _MESH = (
+    ".exr", ".weight.exr", ".mask.npy", ".transmission.npy", ".blocked", ".inc")
+#: A file being written (renamed to its final name when complete).
+_PART = ".part"
+_TIMING = ".timing.json"
+_SPECULATIVE = ".speculative-focal-blur"
 
 
-def blur_settings(plan: Plan, settings: FocalBlurSettings | None = None) -> dict:
-    """focal_blur sampling of a plan as :func:`povlens.pov.mesh.focal_blur_wrapper`
-    takes it: ``blur_samples`` min and max, and the confidence and variance of
-    POV-Ray's adaptive sampling.  ``settings`` (default: those --method auto chose,
-    unless ``--samples`` was given) replace the fixed ``samples, samples``."""
-    if settings is None and plan.decision is not None and plan.inputs.auto_samples is not False:
-        settings = plan.decision.focal_blur
-    if settings is not None:
-        return {"blur_samples": settings.min_samples, "max_blur_samples": settings.max_samples,
-                "confidence": settings.confidence, "variance": settings.variance}
-    n = int(plan.inputs.samples)
-    return {"blur_samples": n, "max_blur_samples": n, "confidence": None, "variance": None}
+def _sample_name(k: int, suffix: str) -> str:
+    return f"{_SAMPLE_PREFIX}{int(k):0{_SAMPLE_DIGITS}d}{suffix}"
 
 
-def focal_blur_text(plan: Plan, outdir: Path, settings: FocalBlurSettings | None = None) -> str:
-    """The text of ``focal_blur.pov`` of ``plan`` in ``outdir`` (sampling:
-    :func:`blur_settings`)."""
-    cam = plan.povray_camera
-    return focal_blur_wrapper(
-        _scene_include(plan, outdir), cam.location, cam.direction, cam.right, cam.up,
-        aperture=cam.aperture, focal_distance=cam.focal_distance,
-        **blur_settings(plan, settings))
+def _batch_name(b: int | str, suffix: str) -> str:
+    """``batch_BBB<suffix>``; ``b`` a string (make's ``%``) is written as it is."""
+    return f"batch_{b}{suffix}" if isinstance(b, str) else f"batch_{int(b):03d}{suffix}"
 
 
-def _batch_wrapper(plan: Plan, outdir: Path) -> str:
-    """Animation wrapper (templates/mesh_batch.pov.tmpl): frame k renders sample k."""
-    scene = os.path.relpath(plan.inputs.scene, outdir / "samples")
-    if plan.field_mesh is not None:
-        return read_template("field_batch.pov.tmpl").substitute(scene_include=pov_string(scene))
-    return read_template("mesh_batch.pov.tmpl").substitute(
-        scene_include=pov_string(scene), sink_centre=pov_vector(plan.sink_centre),
-        sink_radius=f"{SINK_RADIUS:.9g}")
+def _group_name(k0: int, k1: int) -> str:
+    return f"group_{int(k0):04d}_{int(k1):04d}.npz"
 
 
-def _makefile(plan: Plan) -> str:
-    """The folder's Makefile (templates/Makefile.tmpl)."""
-    method = plan.inputs.method
-    if method == "mesh":
-        dones = " ".join(f"samples/batch_{b:03d}.done" for b in range(len(plan.batches)))
-        rules = (f"image.png: {dones}\n\t$(POVLENS) composite .\n\n"
-                 "samples/batch_%.done: plan.json\n\t$(POVLENS) render-batch . $*\n")
-    else:
-        wrapper = "pinhole.pov" if method == "pinhole" else "focal_blur.pov"
-        rules = f"image.png: plan.json {wrapper}\n\t$(POVLENS) render-view . --view {method}\n"
-    return read_template("Makefile.tmpl").substitute(
-        povlens=f"{shlex.quote(sys.executable)} -m povlens", rules=rules)
+#: A group file's name: ``group_K0_K1.npz``.
+_GROUP_NAME = re.compile(r"^group_(\d{4,})_(\d{4,})\.npz$")
 
 
-#: The relative illumination profile a field-mesh composite used (beside exposure.txt).
-ILLUMINATION_FILE = "illumination.json"
+def _npy(a: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, a, allow_pickle=False)
+    return buf.getvalue()
 
 
-def _sample_layout(plan: Plan):
-    """The field samples' pupil domain and interleave (they move every sample's rays)."""
-    fm = plan.field_mesh
-    return None if fm is None else (fm.domain, fm.interleave)
+class RenderFolder:
+    """The files of the render folder at ``path`` (which need not exist yet).
 
+    Paths are ``path`` joined with the file's name, so a relative ``path`` gives
+    relative paths (a Makefile's rules, a focus pull's index).
 
-def stale_samples(old: Plan, new: Plan) -> list[int] | None:
-    """Samples of the old plan that the new plan cannot reuse: ``None`` = all (an
-    input that changes every sample differs), else those whose rows changed or
-    that the new plan no longer has."""
-    oi = {k: v for k, v in old.inputs.to_dict().items() if k not in SAMPLE_INDEPENDENT_INPUTS}
-    ni = {k: v for k, v in new.inputs.to_dict().items() if k not in SAMPLE_INDEPENDENT_INPUTS}
-    if oi != ni or _sample_layout(old) != _sample_layout(new):
-        return None
-    n_old, n_new = int(old.inputs.samples), int(new.inputs.samples)
-    return [k for k in range(n_old)
-            if k >= n_new or old.rows_of_sample(k) != new.rows_of_sample(k)]
+    Parameters
+    ----------
+    path : the render folder, OUTDIR.
+    """
 
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
 
-def invalidate_outputs(outdir: Path, stale: list[int] | None = None) -> None:
-    """Inputs changed: drop what no longer belongs to the plan.  ``stale`` lists the
-    lens samples to drop (None = every sample, and exposure.txt, which depends on
-    the lens, focus and film); images, views and batch markers always go."""
-    # pupil.npz stays: load_if_current checks its inputs.  A sample's mesh (.inc)
-    # goes with the sample: one still wanted may be in use by a running render.
-    patterns = ["samples/*.done", "samples/*.timing.json", "image.exr",
-                "image.png", "view-*.exr"]
-    if stale is None:
-        patterns += ["samples/*.exr", "samples/*.blocked", "samples/*.inc", "samples/*.mask.npy",
-                     "exposure.txt", ILLUMINATION_FILE]
-    for pattern in patterns:
-        for f in outdir.glob(pattern):
-            f.unlink()
-    for k in stale or []:
-        for suffix in (".exr", ".weight.exr", ".mask.npy", ".blocked", ".inc"):
-            (outdir / "samples" / f"sample_{k:04d}{suffix}").unlink(missing_ok=True)
+    def __repr__(self) -> str:
+        return f"RenderFolder({str(self.path)!r})"
 
+    # -- the plan and what it derives -------------------------------------------------
 
-def write_folder(outdir: Path, plan: Plan) -> None:
-    """Write a plan's files into ``outdir``: plan.json, the wrappers, the Makefile.
+    @property
+    def plan_json(self) -> Path:
+        """The plan (:func:`povlens.plan.schema.read_plan`)."""
+        return self.path / PLAN_FILE
 
-    What an earlier plan in the folder rendered that this one cannot use is
-    removed first (:func:`stale_samples`, :func:`invalidate_outputs`)."""
-    outdir = Path(outdir)
-    old = None
-    if (outdir / "plan.json").exists():
+    @property
+    def pupil_npz(self) -> Path:
+        """The exit-pupil table, reused while its inputs hold
+        (:func:`povlens.pupil.storage.cached_pupil_table`)."""
+        return self.path / "pupil.npz"
+
+    @property
+    def makefile(self) -> Path:
+        return self.path / _MAKEFILE
+
+    def wrapper(self, view: str) -> Path:
+        """The wrapper of ``view`` (``pinhole`` or ``focal-blur``, :data:`VIEWS`)."""
+        return self.path / VIEWS[view]
+
+    def view_image(self, view: str) -> Path:
+        """``view-<view>.exr``: ``view`` as POV-Ray rendered it."""
+        return self.path / f"view-{view}.exr"
+
+    @property
+    def speculative_wrapper(self) -> Path:
+        """The wrapper of the focal_blur view ``--method auto`` starts before it decides
+        (its own file: a provisional plan may rewrite ``focal_blur.pov`` meanwhile)."""
+        return self.path / (_SPECULATIVE + ".pov")
+
+    @property
+    def speculative_view(self) -> Path:
+        """Where that view renders (renamed to :meth:`view_image` when it is chosen)."""
+        return self.path / (_SPECULATIVE + ".exr")
+
+    @property
+    def exposure_txt(self) -> Path:
+        """The composite's exposure (:meth:`read_exposure`)."""
+        return self.path / "exposure.txt"
+
+    @property
+    def illumination_json(self) -> Path:
+        """The relative illumination profile a field-mesh composite used."""
+        return self.path / "illumination.json"
+
+    @property
+    def image_exr(self) -> Path:
+        return self.path / "image.exr"
+
+    @property
+    def image_png(self) -> Path:
+        return self.path / "image.png"
+
+    # -- lens samples, batches, groups --------------------------------------------------
+
+    @property
+    def samples(self) -> Path:
+        """The folder of the lens samples, batches and groups."""
+        return self.path / _SAMPLES
+
+    def sample_image(self, k: int) -> Path:
+        """Lens sample k as POV-Ray rendered it (linear EXR)."""
+        return self.samples / _sample_name(k, _IMAGE)
+
+    def sample_weight(self, k: int) -> Path:
+        """Sample k's per-pixel radiometric weights (float32 EXR; per-pixel meshes)."""
+        return self.samples / _sample_name(k, _WEIGHT)
+
+    def sample_mask(self, k: int) -> Path:
+        """Sample k's pass mask (field meshes: :meth:`read_pass_mask`)."""
+        return self.samples / _sample_name(k, _MASK)
+
+    def sample_transmission(self, k: int) -> Path:
+        """Sample k's per-pixel transmission of a grey mask stop (float32 .npy)."""
+        return self.samples / _sample_name(k, _TRANSMISSION)
+
+    def sample_blocked(self, k: int) -> Path:
+        """Marker: every ray of sample k's rows is blocked (black, weight 0, not
+        rendered); it holds the rows ``R0 R1``."""
+        return self.samples / _sample_name(k, _BLOCKED)
+
+    def sample_mesh(self, k: int) -> Path:
+        """Sample k's ray mesh (written just before its render, deleted after)."""
+        return self.samples / _sample_name(k, _MESH)
+
+    @staticmethod
+    def partial(path: Path) -> Path:
+        """The name ``path`` is written under until it is complete."""
+        return path.with_name(path.name + _PART)
+
+    def sample_temp_prefix(self, k: int) -> str:
+        """Prefix of the temporary folder sample k renders in (inside :attr:`samples`)."""
+        return "." + _sample_name(k, ".")
+
+    def sample_outputs(self, k: int) -> list[Path]:
+        """The files of sample k on disk but its ray mesh and files being written: what
+        a cluster worker sends back."""
+        return sorted(p for p in self.samples.glob(_sample_name(k, ".*"))
+                      if p.is_file() and not p.name.endswith((_MESH, _PART)))
+
+    def sample_done(self, k: int) -> bool:
+        """Whether lens sample k is rendered: its weights (or pass mask: field meshes)
+        exist, and its image or the marker that it has none (all its rays blocked);
+        or a group file covers it."""
+        return ((self.sample_weight(k).exists() or self.sample_mask(k).exists())
+                and (self.sample_image(k).exists() or self.sample_blocked(k).exists())
+                ) or self.grouped(k)
+
+    def batch_wrapper(self, b: int) -> Path:
+        """The wrapper of batch b (:mod:`povlens.data` ``mesh_batch.pov.tmpl``)."""
+        return self.samples / _batch_name(b, ".pov")
+
+    def batch_done(self, b: int) -> Path:
+        """make's target of batch b: the batch's sample numbers, one a line."""
+        return self.samples / _batch_name(b, ".done")
+
+    def mark_batch_done(self, b: int, ks) -> None:
+        """Write :meth:`batch_done` of batch b, whose samples are ``ks``."""
+        write_text(self.batch_done(b), "".join(f"{k}\n" for k in ks))
+
+    def batch_timing(self, b: int) -> Path:
+        """The timings of ``povlens render-batch`` of batch b."""
+        return self.samples / _batch_name(b, _TIMING)
+
+    def timing(self, name: str) -> Path:
+        """``samples/<name>.timing.json``: ``render`` (``povlens render``), ``early``
+        (samples rendered while ``--method auto`` decides), ``cluster``."""
+        return self.samples / (name + _TIMING)
+
+    def timing_files(self) -> list[Path]:
+        """Every timing file of the folder, by name."""
+        return sorted(self.samples.glob("*" + _TIMING))
+
+    def group_file(self, k0: int, k1: int) -> Path:
+        """The partial sums of samples k0 .. k1-1 (:mod:`povlens.rendering.groups`)."""
+        return self.samples / _group_name(k0, k1)
+
+    def group_files(self) -> list[tuple[int, int, Path]]:
+        """The group files: (k0, k1, path), by k0; a group overlapping one before it
+        (not written by povlens) is left out."""
+        if not self.samples.is_dir():
+            return []
+        found = []
+        for p in self.samples.iterdir():
+            m = _GROUP_NAME.match(p.name)
+            if m and int(m.group(1)) < int(m.group(2)):
+                found.append((int(m.group(1)), int(m.group(2)), p))
+        out, end = [], 0
+        for k0, k1, p in sorted(found):
+            if k0 >= end:
+                out.append((k0, k1, p))
+                end = k1
+        return out
+
+    def grouped(self, k: int) -> bool:
+        """Whether a group file covers lens sample ``k``."""
+        return any(k0 <= k < k1 for k0, k1, _ in self.group_files())
+
+    # -- what a change of the plan drops, what a worker needs ---------------------------
+
+    def outputs_to_drop(self, stale: list[int] | None) -> list[Path]:
+        """What no longer belongs to a changed plan: images, views, batch markers and
+        timings always; with ``stale`` None every sample's files, exposure.txt and
+        illumination.json (they depend on the lens, focus and film), else the files
+        of the samples ``stale`` (that may not exist).  pupil.npz stays (it is
+        checked against its inputs when read)."""
+        every = _SAMPLES + "/*"
+        patterns = [every + ".done", every + _TIMING, self.image_exr.name,
+                    self.image_png.name, "view-*.exr"]
+        if stale is None:
+            patterns += [every + s for s in (_IMAGE, _BLOCKED, _MESH, _MASK)]
+            patterns += [self.exposure_txt.name, self.illumination_json.name]
+        out = [f for pattern in patterns for f in self.path.glob(pattern)]
+        for k in stale or []:
+            out += [self.samples / _sample_name(k, s)
+                    for s in (_IMAGE, _WEIGHT, _MASK, _BLOCKED, _MESH)]
+        return out
+
+    def worker_inputs(self) -> list[Path]:
+        """The folder's files a lens sample's POV-Ray run reads: the plan, the pupil
+        table and the wrappers (the views' and the batches')."""
+        return ([self.plan_json, self.pupil_npz] + sorted(self.path.glob("*.pov"))
+                + sorted(self.samples.glob("*.pov")))
+
+    # -- names for the templates ---------------------------------------------------------
+
+    def makefile_names(self, batches: int) -> dict[str, str]:
+        """The folder's names as its Makefile (``Makefile.tmpl``) writes them, relative
+        to the folder: ``image_exr``, ``image_png``, ``plan_json``, ``batch_dones``
+        (the markers of the plan's ``batches`` batches) and ``batch_done_rule`` (make's
+        pattern of a marker, ``%`` the batch).  The views' wrappers: :data:`VIEWS`."""
+        rel = RenderFolder(".")
+        return {"image_exr": rel.image_exr.name, "image_png": rel.image_png.name,
+                "plan_json": PLAN_FILE,
+                "batch_dones": " ".join(rel.batch_done(b).as_posix() for b in range(batches)),
+                "batch_done_rule": f"{_SAMPLES}/{_batch_name('%', '.done')}"}
+
+    @staticmethod
+    def mesh_include_names() -> dict[str, str]:
+        """How a batch wrapper (``mesh_batch.pov.tmpl``, ``field_batch.pov.tmpl``)
+        names sample k's mesh: ``sample_prefix`` + k zero-padded to ``sample_digits``
+        + ``mesh_suffix``."""
+        return {"sample_prefix": _SAMPLE_PREFIX, "sample_digits": str(_SAMPLE_DIGITS),
+                "mesh_suffix": _MESH}
+
+    # -- readers and writers of the small files -----------------------------------------
+
+    def read_exposure(self) -> float | None:
+        """The exposure in :attr:`exposure_txt`, None if there is none or it does not
+        read as a number (it is then computed again)."""
+        if not self.exposure_txt.exists():
+            return None
         try:
-            old = read_plan(outdir)
-        except PovlensError:
-            old = None
-    if old is not None and (old.inputs.to_dict() != plan.inputs.to_dict()
-                            or _sample_layout(old) != _sample_layout(plan)):
-        invalidate_outputs(outdir, stale_samples(old, plan))
-    cam = plan.povray_camera
-    write_if_changed(outdir / "pinhole.pov", pinhole_wrapper(
-        _scene_include(plan, outdir), cam.location, cam.direction, cam.right, cam.up))
-    write_if_changed(outdir / "focal_blur.pov", focal_blur_text(plan, outdir))
-    if plan.inputs.method == "mesh":
-        (outdir / "samples").mkdir(exist_ok=True)
-        text = _batch_wrapper(plan, outdir)
-        for b, _ in enumerate(plan.batches):
-            write_if_changed(outdir / "samples" / f"batch_{b:03d}.pov", text)
-    write_if_changed(outdir / "Makefile", _makefile(plan))
-    write_plan(plan, outdir)
+            return float(self.exposure_txt.read_text())
+        except ValueError:
+            return None
+
+    def write_exposure(self, exposure: float) -> None:
+        write_text(self.exposure_txt, f"{exposure!r}\n")
+
+    def read_weight(self, k: int) -> np.ndarray:
+        """(H, W) float32 weights of sample k (per-pixel meshes)."""
+        from povlens.util.images import read_image      # OpenImageIO: not for a conversion
+        return read_image(self.sample_weight(k))[..., 0]
+
+    def write_pass_mask(self, k: int, passed: np.ndarray) -> None:
+        """Write sample k's pass mask ((H, W) bool), bits packed by row."""
+        write_bytes(self.sample_mask(k), _npy(np.packbits(passed, axis=1)))
+
+    def read_pass_mask(self, k: int, height: int, width: int) -> np.ndarray:
+        """(H, W) bool pass mask of sample k.
+
+        Raises
+        ------
+        PovlensError
+            The file cannot be read or is not of the film's size: names it and says
+            what to delete.
+        """
+        path = self.sample_mask(k)
+        redo = f"delete it and {self.sample_image(k).name}, then render again"
+        try:
+            packed = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as e:
+            raise PovlensError(f"{path}: cannot read the sample's pass mask ({e})",
+                               redo) from None
+        passed = np.unpackbits(packed, axis=1, count=width).astype(bool)
+        if passed.shape != (height, width):
+            raise PovlensError(f"{path} holds a {passed.shape} mask, not the film's "
+                               f"{(height, width)}", redo)
+        return passed
+
+    def write_transmission(self, k: int, transmission: np.ndarray) -> None:
+        write_bytes(self.sample_transmission(k), _npy(transmission))
+
+    def read_transmission(self, k: int) -> np.ndarray:
+        """(H, W) float32 transmission of sample k's grey mask stop.
+
+        Raises
+        ------
+        PovlensError
+            The file cannot be read: names it and says what to delete.
+        """
+        path = self.sample_transmission(k)
+        try:
+            return np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as e:
+            raise PovlensError(f"{path}: cannot read the sample's mask transmission ({e})",
+                               f"delete {self.sample_mask(k).name} and "
+                               f"{self.sample_image(k).name}, then render again") from None
+
+
+class FramesFolder:
+    """The files of a focus pull's folder at ``path``: a render folder per frame, the
+    frames' numbered images, the index and the Makefile.
+
+    Parameters
+    ----------
+    path : the frames folder, OUTDIR.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+
+    def __repr__(self) -> str:
+        return f"FramesFolder({str(self.path)!r})"
+
+    @property
+    def frames_json(self) -> Path:
+        """The index (:func:`povlens.rendering.focus_pull.read_frames`)."""
+        return self.path / FRAMES_FILE
+
+    @property
+    def makefile(self) -> Path:
+        return self.path / _MAKEFILE
+
+    def is_frames_folder(self) -> bool:
+        """Written by ``povlens render/convert --frames``: an index and no plan."""
+        return self.frames_json.is_file() and not RenderFolder(self.path).plan_json.is_file()
+
+    @staticmethod
+    def frame_name(i: int) -> str:
+        """The render folder of frame ``i`` (1-based), relative: ``frame-0001``."""
+        return f"frame-{int(i):04d}"
+
+    @staticmethod
+    def image_name(i: int, ext: str) -> str:
+        """Frame ``i``'s image in the frames folder, numbered for video tools
+        (``ffmpeg -i OUTDIR/image.%04d.png``): ``image.0001.exr`` (``ext`` ``exr``
+        or ``png``)."""
+        return f"image.{int(i):04d}.{ext}"
+
+    def frame(self, name: str) -> RenderFolder:
+        """The render folder of the frame whose folder is ``name``."""
+        return RenderFolder(self.path / name)

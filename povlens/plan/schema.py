@@ -27,6 +27,7 @@ import numpy as np
 
 from povlens.errors import PovlensError
 from povlens.lens.film import Film
+from povlens.plan.render_folder import PLAN_FILE
 from povlens.thinlens.model import EquivalentThinLens
 from povlens.util.files import write_text
 from povlens.thinlens.model_error import ModelError
@@ -41,8 +42,6 @@ __all__ = ["SCHEMA_VERSION", "PLAN_FILE", "Inputs", "LensSummary", "FocusSolutio
 SCHEMA_VERSION = 1
 #: The key of the version in plan.json.
 VERSION_KEY = "povlens_plan"
-#: The plan's file name in a render folder.
-PLAN_FILE = "plan.json"
 
 Vector = tuple[float, float, float]
 

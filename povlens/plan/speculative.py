@@ -29,7 +29,8 @@ from povlens.plan.decision import (FOCAL_BLUR_ADAPTIVE, MIN_SAMPLES, STRONG_VIGN
                                    shape_error_px)
 from povlens.plan.fixed import PlanReuse, PlanStart, finish_plan
 from povlens.plan.options import ConvertOptions, povray_options_of
-from povlens.plan.render_folder import focal_blur_text, write_folder
+from povlens.plan.folder_writer import focal_blur_text, write_folder
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Decision, Plan
 from povlens.pov.process import RenderJob, start_render
 from povlens.util.files import write_text
@@ -135,14 +136,14 @@ def start_speculative_focal_blur(opts: ConvertOptions, plan0: Plan) -> Speculati
     writes at the same time rewrites ``focal_blur.pov`` with its own sample
     count, possibly before POV-Ray has read it.  The image goes to
     ``.speculative-focal-blur.exr`` in OUTDIR; POV-Ray gets the user's options, as the
-    final view would (:func:`povlens.rendering.samples.render_view`).
+    final view would (:func:`povlens.rendering.views.render_view`).
     """
     out = Path(opts.outdir)
-    pov = out / ".speculative-focal-blur.pov"
+    pov = RenderFolder(out).speculative_wrapper
     write_text(pov, focal_blur_text(plan0, out, FOCAL_BLUR_ADAPTIVE))
     film = plan0.film
     try:
-        job = start_render(pov, out / ".speculative-focal-blur.exr",
+        job = start_render(pov, RenderFolder(out).speculative_view,
                            film.width_px, film.height_px, threads=os.cpu_count() or 1,
                            library_paths=[Path(plan0.inputs.scene).parent],
                            povray_options=povray_options_of(plan0.inputs),
@@ -157,7 +158,7 @@ def start_speculative_focal_blur(opts: ConvertOptions, plan0: Plan) -> Speculati
 class EarlySamples:
     """Lens samples rendering before the decision: the provisional plan they belong
     to and the handle ``render_early`` returned (``extend(plan)``, ``wait()``,
-    ``cancel()``; :class:`povlens.rendering.samples.EarlyRender`)."""
+    ``cancel()``; :class:`povlens.rendering.driver.EarlyRender`)."""
 
     plan: Plan
     render: object

@@ -9,7 +9,7 @@ sampling plane z = z_p) is
 
 and the relative illumination is E(r) / E(0): natural (cos^4) and mechanical
 (cat's-eye) vignetting together.  It is what a mesh render composited with its
-radiometric weights shows (:func:`povlens.rendering.samples.composite_outdir`:
+radiometric weights shows (:func:`povlens.rendering.folder_composite.composite_outdir`:
 ``image *= sum w * exposure / N``, exposure = 1 / (E/L)(0)): the expected weight
 of a pixel's samples is E(pixel) / L, since the weights are ``cos^4 / (z_p^2 pdf)``
 of the rays that pass.

@@ -54,57 +54,84 @@ def accumulate_samples(
         raise PovlensError(f"drop_top_rows and drop_right_columns must be >= 0, got "
                            f"{drop_top_rows} and {drop_right_columns}")
     weights = None if weight_arrays is None else iter(weight_arrays)
-    total = wsum = shape = None
+    total = wsum = None
     for k, p in enumerate(paths):
-        img = read_image(p)
-        if img.shape[0] <= drop:
-            raise PovlensError(
-                f"image {p} has only {img.shape[0]} rows; cannot drop {drop} top row(s)"
-            )
-        if img.shape[1] <= right:
-            raise PovlensError(
-                f"image {p} has only {img.shape[1]} columns; cannot drop {right} column(s)")
-        img = img[drop:, :img.shape[1] - right]
-        if transform is not None:
-            img = transform(img)
-        if shape is None:
-            shape = img.shape
-            total = np.zeros(shape, dtype=np.float64)
-            if weights is not None:
-                wsum = np.zeros(shape[:2] + ((4,) if channel_weights is not None else ()),
-                                dtype=np.float64)
-        elif img.shape != shape:
+        img = _cropped_image(p, drop, right, transform)
+        if total is None:
+            total, wsum = _zero_sums(img.shape, weights is not None, channel_weights is not None)
+        elif img.shape != total.shape:
             raise PovlensError(
                 f"image {p} has shape {img.shape} after dropping {drop} row(s), but "
-                f"{paths[0]} has {shape}",
+                f"{paths[0]} has {total.shape}",
                 "all samples of one composite must be rendered at the same size",
             )
         if weights is None:
             total += img
             continue
-        w = next(weights, None)
-        if w is None:
-            raise PovlensError(f"composite: {len(paths)} sample images but only {k} weight "
-                               f"arrays")
-        w = np.asarray(w, dtype=np.float64)
-        if w.shape != shape[:2]:
-            raise PovlensError(
-                f"weight array {k} (for {p}) has shape {w.shape}, expected {shape[:2]}"
-            )
-        if not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise PovlensError(f"weight array {k} (for {p}) has negative or non-finite values")
-        if channel_weights is not None:
-            wc = w[:, :, None] * np.asarray(channel_weights[k], dtype=np.float64)[None, None, :3]
-            total[..., :3] += wc * img[..., :3]
-            total[..., 3:] += w[:, :, None] * img[..., 3:]
-            wsum[..., :3] += wc
-            wsum[..., 3] += w
-            continue
-        total += w[:, :, None] * img
-        wsum += w
+        w = _checked_weight(next(weights, None), k, p, len(paths), total.shape[:2])
+        _add_weighted(total, wsum, img, w,
+                      None if channel_weights is None else channel_weights[k])
     if weights is not None and next(weights, None) is not None:
         raise PovlensError(f"composite: {len(paths)} sample images but more weight arrays")
     return total, wsum
+
+
+def _cropped_image(path, drop: int, right: int, transform) -> np.ndarray:
+    """Sample image ``path`` without its ``drop`` top rows and ``right`` right columns,
+    then ``transform``-ed (when given)."""
+    img = read_image(path)
+    if img.shape[0] <= drop:
+        raise PovlensError(
+            f"image {path} has only {img.shape[0]} rows; cannot drop {drop} top row(s)"
+        )
+    if img.shape[1] <= right:
+        raise PovlensError(
+            f"image {path} has only {img.shape[1]} columns; cannot drop {right} column(s)")
+    img = img[drop:, :img.shape[1] - right]
+    if transform is not None:
+        img = transform(img)
+    return img
+
+
+def _zero_sums(shape: tuple, weighted: bool, per_channel: bool):
+    """Zero float64 sums for images of ``shape``: ``sum w I`` and (``weighted``) ``sum w``,
+    4 channels of it with ``per_channel`` weights (else None)."""
+    total = np.zeros(shape, dtype=np.float64)
+    wsum = None
+    if weighted:
+        wsum = np.zeros(shape[:2] + ((4,) if per_channel else ()), dtype=np.float64)
+    return total, wsum
+
+
+def _checked_weight(w, k: int, path, n: int, shape: tuple) -> np.ndarray:
+    """Weight array ``k`` (of sample image ``path``, one of ``n``) as float64 (H, W),
+    refused when missing, of another shape, negative or not finite."""
+    if w is None:
+        raise PovlensError(f"composite: {n} sample images but only {k} weight arrays")
+    w = np.asarray(w, dtype=np.float64)
+    if w.shape != shape:
+        raise PovlensError(
+            f"weight array {k} (for {path}) has shape {w.shape}, expected {shape}"
+        )
+    if not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise PovlensError(f"weight array {k} (for {path}) has negative or non-finite values")
+    return w
+
+
+def _add_weighted(total: np.ndarray, wsum: np.ndarray, img: np.ndarray, w: np.ndarray,
+                  channel_weight) -> None:
+    """Add ``w I`` to ``total`` and ``w`` to ``wsum`` in place; with ``channel_weight``
+    f_c (3,): ``f_c w I_c`` and ``f_c w`` in the colour channels, plain ``w`` as the
+    4th of ``wsum``."""
+    if channel_weight is not None:
+        wc = w[:, :, None] * np.asarray(channel_weight, dtype=np.float64)[None, None, :3]
+        total[..., :3] += wc * img[..., :3]
+        total[..., 3:] += w[:, :, None] * img[..., 3:]
+        wsum[..., :3] += wc
+        wsum[..., 3] += w
+        return
+    total += w[:, :, None] * img
+    wsum += w
 
 
 def measurement_image(total: np.ndarray, wsum: np.ndarray, samples_per_row: np.ndarray,

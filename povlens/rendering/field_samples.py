@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from povlens.errors import PovlensError
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.pov.field_mesh import (build_field_meshes, combine_meshes, deinterleave,
                                     mesh2_text, pass_models, pass_rows, placement_text)
@@ -34,10 +34,9 @@ from povlens.pupil.field_domain import FieldDomain, disc_domain
 from povlens.pupil.field_mask import field_transmission, pass_masks
 from povlens.pupil.rays import ScenePlacement
 from povlens.rendering.vignetting import mesh_illumination_map
-from povlens.util.files import write_bytes
 
 __all__ = ["placement_of", "FieldTile", "field_tiles", "field_domain_of", "sample_lens",
-           "mask_path", "write_field_sample", "field_sample_weight", "image_layout",
+           "write_field_sample", "field_sample_weight", "image_layout",
            "illumination_map", "render_rows"]
 
 
@@ -128,26 +127,6 @@ def sample_lens(plan: Plan, lens, k: int):
     return lens_at_wavelength(lens, float(sample_wavelength_nm(k, plan.inputs.seed)[0]))
 
 
-def mask_path(outdir: Path, k: int) -> Path:
-    return Path(outdir) / "samples" / f"sample_{k:04d}.mask.npy"
-
-
-def transmission_path(outdir: Path, k: int) -> Path:
-    """Sample k's per-pixel transmission of a mask stop (float32 .npy; mask plans only)."""
-    return Path(outdir) / "samples" / f"sample_{k:04d}.transmission.npy"
-
-
-def _npy(a: np.ndarray) -> bytes:
-    import io
-    buf = io.BytesIO()
-    np.save(buf, a, allow_pickle=False)
-    return buf.getvalue()
-
-
-def _pack(mask: np.ndarray) -> bytes:
-    return _npy(np.packbits(mask, axis=1))
-
-
 def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path) -> bool:
     """Trace pass k, write its pass mask and, if any pixel of its rows passes, its
     mesh to ``inc``.  Returns False when every ray of its rows is blocked."""
@@ -181,13 +160,14 @@ def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path)
     r0, r1 = plan.rows_of_sample(k)
     passed[:r0] = False
     passed[r1:] = False
+    folder = RenderFolder(outdir)
     if masked:          # before the mask (its done marker)
-        write_bytes(transmission_path(outdir, k), _npy(transmission))
-    write_bytes(mask_path(outdir, k), _pack(passed))
+        folder.write_transmission(k, transmission)
+    folder.write_pass_mask(k, passed)
     if not passed.any():
         return False
     one = combine_meshes(meshes)
-    part = inc.with_name(inc.name + ".part")
+    part = folder.partial(inc)
     with open(part, "w") as f:
         f.write(mesh2_text(one))
         f.write(placement_text(one))
@@ -198,17 +178,8 @@ def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path)
 def field_sample_weight(plan: Plan, table, outdir: Path, k: int) -> np.ndarray:
     """(H, W) float32 weights of rendered sample k (its mask and its tiles' samples)."""
     film = plan.film
-    path = mask_path(outdir, k)
-    try:
-        packed = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as e:
-        raise PovlensError(f"{path}: cannot read the sample's pass mask ({e})",
-                           f"delete it and sample_{k:04d}.exr, then render again") from None
-    passed = np.unpackbits(packed, axis=1, count=film.width_px).astype(bool)
-    if passed.shape != (film.height_px, film.width_px):
-        raise PovlensError(f"{path} holds a {passed.shape} mask, not the film's "
-                           f"{(film.height_px, film.width_px)}",
-                           f"delete it and sample_{k:04d}.exr, then render again")
+    folder = RenderFolder(outdir)
+    passed = folder.read_pass_mask(k, film.height_px, film.width_px)
     w = np.zeros(passed.shape, np.float32)
     for tile in field_tiles(plan, k):
         rows, cols = tile.model.rows(), tile.model.columns()
@@ -216,12 +187,5 @@ def field_sample_weight(plan: Plan, table, outdir: Path, k: int) -> np.ndarray:
                                              tile.model.jitter_px, passed[np.ix_(rows, cols)],
                                              cols, rows)
     if plan.inputs.aperture_image:                        # grey mask: w times transmission
-        tpath = transmission_path(outdir, k)
-        try:
-            t = np.load(tpath, allow_pickle=False)
-        except (OSError, ValueError) as e:
-            raise PovlensError(f"{tpath}: cannot read the sample's mask transmission ({e})",
-                               f"delete sample_{k:04d}.mask.npy and sample_{k:04d}.exr, "
-                               "then render again") from None
-        w = w * t.astype(np.float32)
+        w = w * folder.read_transmission(k).astype(np.float32)
     return w

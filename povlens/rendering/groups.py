@@ -2,9 +2,10 @@
 
 A distributed render (:mod:`povlens.cluster`) sends a *group* of consecutive lens
 samples ``k0 .. k1-1`` to a worker, which renders them and adds their terms of the
-composite's sums (:func:`povlens.rendering.samples.sample_sums`, float64, in sample
-order) into one partial sum.  The client keeps it as ``samples/group_K0_K1.npz``
-(written atomically, :func:`pack_group`):
+composite's sums (:func:`povlens.rendering.folder_composite.sample_sums`, float64, in
+sample order) into one partial sum.  The client keeps it as ``samples/group_K0_K1.npz``
+(:meth:`~povlens.plan.render_folder.RenderFolder.group_file`; written atomically,
+:func:`pack_group`):
 
 * ``total`` (H, W, 3) float32, ``sum_k w_k I_k`` over the group's samples (the colour
   channels only: the composite reads no others);
@@ -20,8 +21,8 @@ rounding of a partial (relative 6e-8) is that of the float32 ``image.exr`` itsel
 A render folder then holds *units*: groups, and single samples rendered one by one
 (``sample_KKKK.*``: a local render, ``make``, a cluster render with group size 1).
 :func:`render_units` lists them and what is left to render; a sample a group covers
-counts as rendered (:func:`grouped`, used by ``samples._sample_done``), so a local
-resume, ``make`` and ``povlens composite`` skip it, and :func:`group_sums` gives
+counts as rendered (:meth:`~povlens.plan.render_folder.RenderFolder.sample_done`), so a
+local resume, ``make`` and ``povlens composite`` skip it, and :func:`group_sums` gives
 ``composite_outdir`` the sums, units added in the order of their first sample.
 With single samples only, that order is the sample order of a local composite, so
 the sums are its sums bit for bit.
@@ -32,58 +33,25 @@ from __future__ import annotations
 import io
 import math
 import os
-import re
 from pathlib import Path
 
 import numpy as np
 
 from povlens.errors import PovlensError
+from povlens.plan.render_folder import RenderFolder
 from povlens.util.files import write_bytes
 
-__all__ = ["GROUP_MAX", "group_path", "group_files", "grouped", "render_units", "chunk_groups",
-           "choose_group_size", "GroupSums", "group_terms", "pack_group", "write_group", "load_group",
-           "UnitSums", "unit_terms", "group_sums"]
+__all__ = ["GROUP_MAX", "render_units", "chunk_groups", "choose_group_size", "GroupSums",
+           "group_terms", "pack_group", "write_group", "load_group", "UnitSums", "unit_terms",
+           "group_sums"]
 
 #: Largest automatic group (samples): past it a dead worker loses too much work and
 #: the slowest group ends the render late.
 GROUP_MAX = 16
 
-_NAME = re.compile(r"^group_(\d{4,})_(\d{4,})\.npz$")
-
-
-def group_path(outdir: str | os.PathLike, k0: int, k1: int) -> Path:
-    """``OUTDIR/samples/group_K0_K1.npz``: the partial sums of samples k0 .. k1-1."""
-    return Path(outdir) / "samples" / f"group_{k0:04d}_{k1:04d}.npz"
-
-
-def group_files(outdir: str | os.PathLike) -> list[tuple[int, int, Path]]:
-    """The group files of a render folder: (k0, k1, path), by k0; a group overlapping
-    one before it (not written by povlens) is left out."""
-    samples = Path(outdir) / "samples"
-    if not samples.is_dir():
-        return []
-    found = []
-    for p in samples.iterdir():
-        m = _NAME.match(p.name)
-        if m and int(m.group(1)) < int(m.group(2)):
-            found.append((int(m.group(1)), int(m.group(2)), p))
-    out, end = [], 0
-    for k0, k1, p in sorted(found):
-        if k0 >= end:
-            out.append((k0, k1, p))
-            end = k1
-    return out
-
-
-def grouped(outdir: str | os.PathLike, k: int) -> bool:
-    """Whether a group file of ``outdir`` covers lens sample ``k``."""
-    return any(k0 <= k < k1 for k0, k1, _ in group_files(outdir))
-
-
-def render_units(outdir: str | os.PathLike, plan, sample_done
-                 ) -> tuple[list[tuple[int, int]], list[int]]:
-    """What a render folder holds and lacks (``sample_done(outdir, k)``: whether
-    sample k's own files are there, :func:`povlens.rendering.samples.sample_done`).
+def render_units(outdir: str | os.PathLike, plan) -> tuple[list[tuple[int, int]], list[int]]:
+    """What a render folder holds and lacks: its group files and the samples rendered
+    one by one (:meth:`~povlens.plan.render_folder.RenderFolder.sample_done`).
 
     Returns
     -------
@@ -92,14 +60,15 @@ def render_units(outdir: str | os.PathLike, plan, sample_done
     todo : list of int
         Samples neither in a group nor rendered, ascending.
     """
-    groups = group_files(outdir)
+    folder = RenderFolder(outdir)
+    groups = folder.group_files()
     covered = np.zeros(plan.inputs.samples, dtype=bool)
     for k0, k1, _ in groups:
         covered[k0:k1] = True
     done = [(k0, k1) for k0, k1, _ in groups]
     todo = []
     for k in np.flatnonzero(~covered).tolist():
-        if sample_done(outdir, k):
+        if folder.sample_done(k):
             done.append((k, k + 1))
         else:
             todo.append(k)
@@ -140,7 +109,7 @@ class GroupSums:
     """A group's partial sums, each sample added, in sample order, as soon as it and
     those before it are rendered (a worker adds them while the group's other POV-Ray
     processes run).  ``terms(k)``: sample k's float64 sums, None if blocked
-    (:func:`povlens.rendering.samples.sample_sums`)."""
+    (:func:`povlens.rendering.folder_composite.sample_sums`)."""
 
     def __init__(self, ks: list[int], terms):
         self.ks, self.terms = list(ks), terms
@@ -173,7 +142,7 @@ class GroupSums:
 def group_terms(outdir: str | os.PathLike, ks: list[int], plan, table, sample_sums):
     """The float64 sums (``sum w I`` (H, W, 3), ``sum w``) of rendered samples ``ks``,
     added in that order, and the blocked ones; sums None if all are blocked.
-    ``sample_sums`` is :func:`povlens.rendering.samples.sample_sums` (passed in: this
+    ``sample_sums`` is :func:`povlens.rendering.folder_composite.sample_sums` (passed in: this
     module is below it)."""
     sums = GroupSums(ks, lambda k: sample_sums(outdir, k, plan, table))
     sums.ready(lambda k: True)
@@ -194,7 +163,7 @@ def pack_group(ks: list[int], sums, blocked: list[int]) -> bytes:
 
 def write_group(outdir: str | os.PathLike, ks: list[int], data: bytes) -> Path:
     """Write a group file atomically (``data`` from :func:`pack_group`)."""
-    return write_bytes(group_path(outdir, ks[0], ks[-1] + 1), data)
+    return write_bytes(RenderFolder(outdir).group_file(ks[0], ks[-1] + 1), data)
 
 
 def load_group(path: str | os.PathLike):
@@ -250,10 +219,10 @@ class UnitSums:
 def unit_terms(outdir: str | os.PathLike, plan, table, sample_sums):
     """``terms(k0, k1)`` of :class:`UnitSums` for the units of ``outdir``: a group
     file's sums, or a single sample's (``sample_sums``:
-    :func:`povlens.rendering.samples.sample_sums`)."""
+    :func:`povlens.rendering.folder_composite.sample_sums`)."""
 
     def terms(k0: int, k1: int):
-        path = group_path(outdir, k0, k1)
+        path = RenderFolder(outdir).group_file(k0, k1)
         if path.exists():
             return load_group(path)
         return sample_sums(outdir, k0, plan, table)
@@ -264,7 +233,7 @@ def group_sums(outdir: str | os.PathLike, plan, table, sample_sums):
     """``composite_outdir``'s sums of a folder holding group files (None: it has none,
     the composite reads the samples as usual), which has checked that every sample is
     rendered: the samples no group covers are added one by one (``sample_sums``)."""
-    groups = group_files(outdir)
+    groups = RenderFolder(outdir).group_files()
     if not groups:
         return None
     sums = UnitSums(plan.inputs.samples, unit_terms(outdir, plan, table, sample_sums))

@@ -28,7 +28,7 @@ from typing import Callable
 
 import numpy as np
 
-from povlens.plan.render_folder import ILLUMINATION_FILE
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, write_plan
 from povlens.pupil.illumination import (IlluminationProfile, illumination_profile,
                                         profile_from_record, profile_record,
@@ -36,7 +36,7 @@ from povlens.pupil.illumination import (IlluminationProfile, illumination_profil
 
 __all__ = ["wants_vignetting_map", "vignetting_profile", "vignetting_record",
            "apply_vignetting_map", "start_vignetting_map", "PendingVignettingMap",
-           "mesh_illumination_map", "RECORD_METHOD", "ILLUMINATION_FILE"]
+           "mesh_illumination_map", "RECORD_METHOD"]
 
 #: ``vignetting_map.method`` of plan.json.
 RECORD_METHOD = ("relative illumination E(pixel)/E(centre) from the exit-pupil table "
@@ -79,8 +79,9 @@ def vignetting_record(plan: Plan, table, profile: IlluminationProfile,
     rec = profile_record(profile, table)
     rec.pop("min_relative_illumination", None)
     rec.pop("exact_radii", None)
-    return {"applied_to": ["image.exr", "image.png"],
-            "view": f"view-{plan.inputs.method}.exr",
+    names = RenderFolder(".")
+    return {"applied_to": [names.image_exr.name, names.image_png.name],
+            "view": names.view_image(plan.inputs.method).name,
             "method": RECORD_METHOD,
             "pixel_average": bool(plan.inputs.jitter),
             "min_relative_illumination": round(float(ri_map.min()), 7),
@@ -122,7 +123,7 @@ def apply_vignetting_map(outdir, plan: Plan, image: np.ndarray, table) -> np.nda
     plan : its plan (read from ``outdir``).
     image : (H, W, C) linear, the view as POV-Ray rendered it (H, W the film's pixels).
     table : the plan's exit-pupil table
-        (:func:`povlens.rendering.samples.pupil_table_for`).
+        (:func:`povlens.rendering.folder_inputs.pupil_table_for`).
 
     Returns
     -------
@@ -141,11 +142,11 @@ def mesh_illumination_map(outdir, plan: Plan, table) -> np.ndarray:
     """(H, W) the relative illumination a field-mesh composite is scaled by
     (:func:`povlens.rendering.composite.measurement_image`).  Its profile over film
     radius is the plan's (auto's decision measured it) or computed once and kept in
-    OUTDIR/:data:`ILLUMINATION_FILE` (plan.json is left alone: make compares its time
+    OUTDIR/illumination.json (plan.json is left alone: make compares its time
     with the samples'), so a later composite gives the same image bit for bit."""
     import json
     from povlens.util.files import write_text
-    path = Path(outdir) / ILLUMINATION_FILE
+    path = RenderFolder(outdir).illumination_json
     try:
         profile = profile_from_record(json.loads(path.read_text()), table)
     except (OSError, ValueError):

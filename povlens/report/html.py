@@ -42,13 +42,16 @@ from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import LensPrescription, sag_mm
 from povlens.lens.tracer import trace_from_film
 from povlens.plan.depth_probe import axial_depth, probe_depth
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, read_plan
 from povlens.pupil.plot import plot_pupil_shapes
 from povlens.pupil.storage import cached_pupil_table
-from povlens.rendering.samples import composite_outdir, lens_for, render_view
+from povlens.rendering.folder_composite import composite_outdir
+from povlens.rendering.folder_inputs import lens_for
+from povlens.rendering.views import render_view
 from povlens.report.compare import compare_arrays, difference_magnitude, false_colour
-from povlens.rendering.frames import read_frames
-from povlens.report.frames_strip import frames_section, is_frames_folder
+from povlens.rendering.focus_pull import read_frames
+from povlens.report.focus_pull_strip import frames_section, is_frames_folder
 from povlens.util.files import write_text
 from povlens.util.images import read_image
 
@@ -346,7 +349,8 @@ class _Folder:
     def pupil_section(self) -> str:
         fd = self.plan.focus.film_distance_mm
         hd = self.film.max_field_radius_mm            # a shifted frame's farthest corner
-        table, reused = cached_pupil_table(self.dir / "pupil.npz", self.lens, fd, hd, save=False)
+        table, reused = cached_pupil_table(RenderFolder(self.dir).pupil_npz, self.lens, fd, hd,
+                                           save=False)
         if not reused:
             self.timings.append(("exit-pupil table (built for this report)",
                                  table.stats["build_time_s"], ""))
@@ -360,7 +364,7 @@ class _Folder:
 
     # -- renders --
     def _view(self, view: str) -> np.ndarray | None:
-        path = self.dir / f"view-{view}.exr"
+        path = RenderFolder(self.dir).view_image(view)
         if not path.exists() and self.render_missing:
             t0 = time.perf_counter()
             try:
@@ -377,7 +381,7 @@ class _Folder:
     def _mesh(self) -> np.ndarray | None:
         """The mesh render, composited with its vignetting divided out (POV-Ray's pinhole
         and focal_blur cameras have none, so differences then show geometry and blur)."""
-        path = self.dir / "image.exr"
+        path = RenderFolder(self.dir).image_exr
         if self.plan.inputs.method != "mesh" or not path.exists():
             return None
         try:
@@ -431,7 +435,7 @@ class _Folder:
         rows = []
         t_rays = t_pov = t_wall = 0.0
         n = 0
-        for f in sorted((self.dir / "samples").glob("*.timing.json")):
+        for f in RenderFolder(self.dir).timing_files():
             try:
                 t = json.loads(f.read_text())
                 t_rays += float(t.get("rays_and_meshes_s", 0.0))
@@ -559,7 +563,7 @@ class _Folder:
 
 
 class _FramesFolder:
-    """A focus pull's folder (``render --frames``): its strip (:mod:`povlens.report.frames_strip`)."""
+    """A focus pull's folder (``render --frames``): its strip (:mod:`povlens.report.focus_pull_strip`)."""
 
     def __init__(self, outdir: Path):
         self.dir = outdir

@@ -25,7 +25,7 @@ from povlens.lens.prescription import read_lens
 from povlens.plan.convert import ConvertOptions, convert, make_plan
 from povlens.pov.sdl import SceneCameraError, parse_scene_camera
 from povlens.pupil.build import build_pupil_table, sampling_plane_z_mm
-from povlens.rendering.samples import render_view
+from povlens.rendering.views import render_view
 
 SCENE = str(ROOT / "scenes" / "paper.pov")
 LENS = read_lens("dgauss.50mm")

@@ -25,11 +25,11 @@ import povlens                                                    # noqa: E402
 from povlens.cli import main                                      # noqa: E402
 from povlens.cluster import bundle as bundle_module               # noqa: E402
 from povlens.cluster.bundle import make_bundle                    # noqa: E402
-from povlens.cluster.render import render_outdir_on_cluster, task_samples  # noqa: E402
+from povlens.cluster.client import render_outdir_on_cluster, task_samples  # noqa: E402
 from povlens.errors import ParameterError, PovlensError, PovrayError  # noqa: E402
 from povlens.plan.schema import read_plan                         # noqa: E402
 from povlens.rendering.groups import write_group                  # noqa: E402
-from povlens.rendering.samples import render_batch                # noqa: E402
+from povlens.rendering.mesh_samples import render_batch  # noqa: E402
 from povlens.util.images import read_image, write_png_srgb        # noqa: E402
 
 from conftest import ROOT                                         # noqa: E402

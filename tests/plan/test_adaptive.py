@@ -11,9 +11,9 @@ import pytest
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import PovraySettings
 from povlens.util.images import read_image
-from povlens.rendering.samples import (film_row_args, composite_outdir, render_outdir, sample_rows,
-                                       sample_weight,
-                                       samples_per_pixel)
+from povlens.rendering.driver import render_outdir
+from povlens.rendering.folder_composite import composite_outdir, sample_weight, samples_per_pixel
+from povlens.rendering.mesh_samples import film_row_args, sample_rows
 
 from conftest import ROOT
 
@@ -108,7 +108,7 @@ def test_adaptive_render_matches_uniform_and_resumes(tmp_path):
 
 
 def test_blocked_sample_is_not_rendered_and_counts_as_black(tmp_path, monkeypatch):
-    import povlens.rendering.samples as render
+    import povlens.rendering.mesh_samples as render
     convert(opts(tmp_path, "b", adaptive=False, samples=2, batch_size=2, ray_mesh="pixel"))
     real = render.sample_rays
 
@@ -122,7 +122,7 @@ def test_blocked_sample_is_not_rendered_and_counts_as_black(tmp_path, monkeypatc
 
     blocked_for_sample_1.calls = 0
     monkeypatch.setattr(render, "sample_rays", blocked_for_sample_1)
-    render.render_outdir(tmp_path / "b", jobs=1, quiet=True)
+    render_outdir(tmp_path / "b", jobs=1, quiet=True)
     s = tmp_path / "b" / "samples"
     assert (s / "sample_0000.exr").exists() and not (s / "sample_0001.exr").exists()
     assert (s / "sample_0001.blocked").exists()

@@ -113,7 +113,8 @@ def test_speculative_focal_blur_is_the_final_view(tmp_path):
     import numpy as np
     from povlens.plan.convert import convert
     from povlens.util.images import read_image
-    from povlens.rendering.samples import render_outdir, render_view
+    from povlens.rendering.driver import render_outdir
+    from povlens.rendering.views import render_view
     root = pathlib.Path(__file__).resolve().parents[2]
     base = dict(scene=str(root / "scenes" / "paper.pov"), lens="telephoto.250mm", focus=4.0,
                 width=48, height=36, method="auto")
@@ -233,7 +234,7 @@ def test_probe_renders_the_view_and_the_decision_judges_vignetting_by_it(tmp_pat
     pw, ph = probe_size(film)
     assert probe.image.shape == (ph, pw, 3)
     (out / "pin.pov").write_text((ROOT / "scenes" / "paper.pov").read_text())
-    from povlens.plan.render_folder import write_folder
+    from povlens.plan.folder_writer import write_folder
     write_folder(out, plan)
     ref = read_image(render(out / "pinhole.pov", out / "pin.exr", pw, ph))[..., :3]
     np.testing.assert_allclose(probe.image, ref, atol=2e-3)

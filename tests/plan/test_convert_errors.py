@@ -71,7 +71,7 @@ def test_a_failing_decision_stops_what_auto_started(tmp_path, monkeypatch, lens,
     import povlens.plan.convert as conv
     from povlens.errors import PovlensError
     from povlens.plan.convert import ConvertOptions
-    from povlens.rendering.samples import convert_and_render
+    from povlens.rendering.driver import convert_and_render
 
     seen = []
 

@@ -13,7 +13,7 @@ import pytest
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.fixed import PINHOLE_NOTE, make_plan
 from povlens.pov.process import render as povray_render
-from povlens.rendering.samples import render_view
+from povlens.rendering.views import render_view
 from povlens.util.images import read_image
 
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None,

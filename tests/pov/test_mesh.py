@@ -238,8 +238,10 @@ def test_camera_block_and_wrappers():
     pin = pinhole_wrapper("s.pov", LOC, [0, 0, 2], [1.33, 0, 0], [0, 1, 0])
     assert "aperture " not in pin.split("camera {")[1] and "direction <0, 0, 2>" in pin
     assert _keeps_scene_version(fb) and _keeps_scene_version(pin)
+    from povlens.plan.render_folder import RenderFolder
     batch = read_template("mesh_batch.pov.tmpl").substitute(
-        scene_include='"s.pov"', sink_centre="<0, 0, -1e5>", sink_radius="1")
+        RenderFolder.mesh_include_names(), scene_include='"s.pov"',
+        sink_centre="<0, 0, -1e5>", sink_radius="1")
     assert _keeps_scene_version(batch, before="sphere {")
 
 

@@ -21,7 +21,7 @@ from povlens.pupil.aperture_domain import iris_domain, iris_point_mm, iris_scale
 from povlens.pupil.build import build_pupil_table
 from povlens.pupil.field import bounding_disc_radius_mm, concentric_disc_mm
 from povlens.pupil.field_mask import field_transmission
-from povlens.rendering.samples import lens_for
+from povlens.rendering.folder_inputs import lens_for
 from povlens.util.images import read_image, write_png_srgb
 
 from conftest import ROOT
@@ -410,7 +410,7 @@ def test_rendered_far_highlight_has_nine_corners_with_per_pixel_meshes(tmp_path)
 @pytest.mark.parametrize("extra", [[], ["--dispersion"]])
 def test_per_pixel_plans_of_an_iris_record_its_domain(tmp_path, extra):
     from povlens.rendering.pixel_sampler import pixel_sampler
-    from povlens.rendering.samples import pupil_table_for
+    from povlens.rendering.folder_inputs import pupil_table_for
     out = tmp_path / "px"
     assert main(["convert", str(ROOT / "scenes" / "chart.pov"), "--lens", "tessar.50mm",
                  "--method", "mesh", "--ray-mesh", "pixel", "--samples", "4", "--width", "32",

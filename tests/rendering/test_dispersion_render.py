@@ -19,7 +19,7 @@ from povlens.lens.prescription import read_lens
 from povlens.plan.schema import read_plan
 from povlens.rendering import spectral
 from povlens.rendering.composite import accumulate_samples, measurement_image
-from povlens.rendering.samples import lens_for
+from povlens.rendering.folder_inputs import lens_for
 from povlens.util.images import read_image, write_exr
 
 from conftest import ROOT

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from povlens.errors import PovlensError
+from povlens.plan.render_folder import RenderFolder
 from povlens.rendering.groups import (GROUP_MAX, UnitSums, choose_group_size, chunk_groups,
-                                      group_files, grouped, load_group, pack_group, write_group)
+                                      load_group, pack_group, write_group)
 
 
 def test_groups_are_runs_of_consecutive_samples_at_most_size_long():
@@ -29,8 +30,10 @@ def test_group_files_are_found_by_name_and_overlaps_left_out(tmp_path):
     for ks in ([0, 1, 2], [3, 4], [2, 3]):           # the last overlaps both
         write_group(tmp_path, ks, pack_group(ks, None, list(ks)))
     (tmp_path / "samples" / ".group_0005_0006.123.tmp.npz").write_bytes(b"")  # being written
-    assert [(a, b) for a, b, _ in group_files(tmp_path)] == [(0, 3), (3, 5)]
-    assert grouped(tmp_path, 4) and not grouped(tmp_path, 5)
+    folder = RenderFolder(tmp_path)
+    assert [(a, b) for a, b, _ in folder.group_files()] == [(0, 3), (3, 5)]
+    assert folder.grouped(4) and not folder.grouped(5)
+    assert folder.sample_done(4) and not folder.sample_done(5)
     assert load_group(tmp_path / "samples" / "group_0000_0003.npz") is None   # all blocked
 
 

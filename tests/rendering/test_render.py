@@ -12,7 +12,10 @@ import pytest
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import read_plan
 from povlens.util.images import read_image
-from povlens.rendering.samples import composite_outdir, render_batch, render_outdir, render_view
+from povlens.rendering.driver import render_outdir
+from povlens.rendering.folder_composite import composite_outdir
+from povlens.rendering.mesh_samples import render_batch
+from povlens.rendering.views import render_view
 
 from conftest import ROOT
 
@@ -266,7 +269,7 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, l
     decision adds follow in the same pipeline (the rule's count for the largest blur).
     The result equals a fixed mesh render of the decided sample count."""
     from povlens.plan.decision import samples_for_blur
-    from povlens.rendering.samples import convert_and_render
+    from povlens.rendering.driver import convert_and_render
     auto = tmp_path / "auto"
     kw = dict(lens=lens, focus=focus, film_diagonal_mm=film_mm, batch_size=None)
     plan, _ = convert_and_render(opts(tmp_path, outdir=str(auto), method="auto",
@@ -293,7 +296,7 @@ def test_a_wrong_guess_stops_the_early_samples_and_renders_the_decision(tmp_path
     which auto renders with focal_blur: the early samples are stopped and dropped,
     and the folder holds the focal_blur image."""
     import povlens.plan.speculative as speculative
-    from povlens.rendering.samples import convert_and_render
+    from povlens.rendering.driver import convert_and_render
     monkeypatch.setattr(speculative, "lens_rules_out_views", lambda opts, plan0: True)
     out = tmp_path / "auto"
     plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto",
@@ -315,7 +318,7 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
     the decision keeps one and stops the other, and the folder is as a fixed
     render of the decided method leaves it."""
     import povlens.plan.speculative as speculative
-    from povlens.rendering.samples import convert_and_render
+    from povlens.rendering.driver import convert_and_render
     monkeypatch.setattr(speculative, "early_guess", lambda opts, plan0: "either")
     out = tmp_path / "auto"
     plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto", lens=lens,
@@ -329,7 +332,7 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
         assert not list((out / "samples").glob("sample_*"))
         # the view started early is the final wrapper's render (the provisional mesh
         # plan, written at the same time, must not change the wrapper it renders)
-        from povlens.rendering.samples import render_view
+        from povlens.rendering.views import render_view
         plain = tmp_path / "plain"
         convert(opts(tmp_path, outdir=str(plain), method="auto", lens=lens, batch_size=None))
         render_view(plain, "focal-blur")
@@ -354,7 +357,8 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
 
 
 def test_a_cancelled_early_render_leaves_no_povray_and_resumes(tmp_path):
-    from povlens.rendering.samples import EarlyRender, lens_for, pupil_table_for
+    from povlens.rendering.driver import EarlyRender
+    from povlens.rendering.folder_inputs import lens_for, pupil_table_for
     out = tmp_path / "out"
     plan = convert(opts(tmp_path, samples=24, batch_size=None))
     lens = lens_for(plan)

@@ -12,7 +12,9 @@ import pytest
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.schema import read_plan
 from povlens.pupil.illumination import illumination_profile, relative_illumination_map
-from povlens.rendering.samples import lens_for, pupil_table_for, render_outdir, render_view
+from povlens.rendering.driver import render_outdir
+from povlens.rendering.folder_inputs import lens_for, pupil_table_for
+from povlens.rendering.views import render_view
 from povlens.rendering.vignetting import apply_vignetting_map, wants_vignetting_map
 from povlens.util.images import read_image
 

@@ -108,7 +108,7 @@ CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory) -> Path:
     """A tiny mesh render of the paper scene (32x24, 2 lens samples)."""
-    from povlens.rendering.samples import render_outdir
+    from povlens.rendering.driver import render_outdir
     out = tmp_path_factory.mktemp("report") / "paper"
     convert(ConvertOptions(scene=str(ROOT / "scenes" / "paper.pov"), lens="dgauss.50mm",
                            focus=4, outdir=str(out), width=32, height=24, samples=2))

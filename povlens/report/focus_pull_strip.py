@@ -8,15 +8,15 @@ import base64
 import html
 from pathlib import Path
 
-from povlens.rendering.frames import FRAMES_FILE, read_frames
+from povlens.plan.render_folder import FramesFolder
+from povlens.rendering.focus_pull import read_frames
 
 __all__ = ["is_frames_folder", "frames_section"]
 
 
 def is_frames_folder(outdir: str | Path) -> bool:
     """A folder written by ``povlens render/convert --frames`` (frames.json, no plan)."""
-    d = Path(outdir)
-    return (d / FRAMES_FILE).is_file() and not (d / "plan.json").is_file()
+    return FramesFolder(outdir).is_frames_folder()
 
 
 def _png(path: Path, alt: str) -> str:

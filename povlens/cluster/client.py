@@ -30,12 +30,14 @@ from povlens.cluster.bundle import make_bundle
 from povlens.cluster.worker import forget_render, render_group, render_sample
 from povlens.errors import ParameterError, PovlensError, PovrayError
 from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import read_plan
+from povlens.rendering.driver import render_outdir
+from povlens.rendering.folder_composite import composite_outdir, sample_sums
+from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
 from povlens.rendering.groups import (UnitSums, choose_group_size, chunk_groups, render_units,
                                       unit_terms, write_group)
-from povlens.rendering.samples import (composite_outdir, exposure_for, lens_for,
-                                       mark_batches_done, pupil_table_for, render_outdir,
-                                       sample_done, sample_sums)
+from povlens.rendering.mesh_samples import mark_batches_done
 from povlens.util.files import write_bytes, write_text
 
 __all__ = ["ENV_VAR", "CONNECT_TIMEOUT_S", "WORKER_WAIT_S", "scheduler_address", "connect",
@@ -138,14 +140,15 @@ def task_samples(key: str) -> list[int]:
 def _write_result(outdir: Path, res: dict, shared: bool) -> None:
     """Write a task's files into ``OUTDIR/samples`` (atomically; a sample's image last:
     then it is done) and check they are there."""
-    samples = outdir / "samples"
+    folder = RenderFolder(outdir)
+    samples = folder.samples
     ks = res["ks"]
     if "group" in res["files"]:
         write_group(outdir, ks, res["files"]["group"])
         return
     for name, data in sorted(res["files"].items(), key=lambda f: f[0].endswith(".exr")):
         write_bytes(samples / name, data)
-    if not all(sample_done(outdir, k) for k in ks):
+    if not all(folder.sample_done(k) for k in ks):
         raise PovlensError(f"lens sample {ks[0]}: worker {res['host']} rendered it, but "
                            f"{samples} has no result" + (
                                ": do the workers see this folder at the same path?"
@@ -231,7 +234,7 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
     Parameters
     ----------
     outdir : a folder written by ``povlens convert``.  Other methods than mesh have
-        a single POV-Ray run, rendered here (:func:`povlens.rendering.samples.render_outdir`).
+        a single POV-Ray run, rendered here (:func:`povlens.rendering.driver.render_outdir`).
     scheduler : the scheduler's address (``tcp://host:8786``), a ``distributed.Client``
         (left open) or a cluster object (``LocalCluster``, ``SLURMCluster``).
     shared_dir : the workers see the scene, lens and ``outdir`` at the same paths (a
@@ -257,13 +260,13 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
         (:func:`povlens.cluster.worker.render_sample`).  Also written to
         ``samples/cluster.timing.json``.
     """
-    from tqdm import tqdm
     t0 = time.perf_counter()
     outdir = Path(os.path.abspath(outdir))
+    folder = RenderFolder(outdir)
     plan = read_plan(outdir)
     if plan.inputs.method != "mesh":
         return render_outdir(outdir, quiet=quiet), {"samples": 0}
-    done, todo = render_units(outdir, plan, sample_done)   # groups and samples on disk
+    done, todo = render_units(outdir, plan)   # groups and samples on disk
     stats = {"samples": len(todo), "tasks": []}
     sums = None
     if todo:
@@ -271,36 +274,11 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
         table = pupil_table_for(outdir, plan, lens)       # built here once, sent with the job
         client, owned = _client_of(scheduler, connect_timeout_s)
         stats["connect_s"] = time.perf_counter() - t0
-        futures, job = [], None
         try:
-            _wait_for_workers(client, worker_wait_s)
-            size = _group_size(group_size, client, len(todo))
-            groups = chunk_groups(todo, size)
-            if shared_dir:
-                job = {"outdir": str(outdir), "key": f"shared-{uuid.uuid4().hex}",
-                       "bundle": None, "shared": True}
-            else:
-                key, data = make_bundle(outdir, plan)
-                job = {"outdir": str(outdir), "key": key, "bundle": data, "shared": False}
-            stats.update(bundle_bytes=len(job["bundle"] or b""), group_size=size,
-                         groups=len(groups))
-            futures = _submit(client, job, groups, size)
-            stats["scatter_s"] = time.perf_counter() - t0 - stats["connect_s"]
-            stats["workers"] = len(client.nthreads())
-            stats["threads"] = sum(client.nthreads().values())
-            exposure_for(outdir, plan, lens, table)      # while the workers render
-            sums = UnitSums(plan.inputs.samples, unit_terms(outdir, plan, table, sample_sums))
-            for k0, k1 in done:
-                sums.add(k0, k1)                         # rendered before: resumed
-            with tqdm(total=len(todo), desc="lens samples", unit="sample", file=sys.stderr,
-                      disable=quiet or not sys.stderr.isatty()) as bar:
-                stats["tasks"] = _collect(client, futures, outdir, shared_dir, on_sample,
-                                          bar, sums)
+            sums = _render_on(client, outdir, plan, lens, table, done, todo, stats, t0,
+                              shared_dir=shared_dir, quiet=quiet, worker_wait_s=worker_wait_s,
+                              on_sample=on_sample, group_size=group_size)
         finally:
-            if futures:
-                client.cancel(futures)
-            if job is not None:         # the workers' replica and loaded plan
-                _forget(client, job["key"])
             if owned:
                 client.close()
     mark_batches_done(outdir, plan)
@@ -309,8 +287,55 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
     stats["composite_after_s"] = time.perf_counter() - t1
     stats["wall_s"] = time.perf_counter() - t0
     if todo:
-        write_text(outdir / "samples" / "cluster.timing.json", json.dumps(stats) + "\n")
-    return outdir / "image.exr", stats
+        write_text(folder.timing("cluster"), json.dumps(stats) + "\n")
+    return folder.image_exr, stats
+
+
+def _job(outdir: Path, plan, shared_dir: bool) -> dict:
+    """What every task gets: the render folder, the bundle's key and bytes (None when
+    the workers see the folder: ``shared_dir``)."""
+    if shared_dir:
+        return {"outdir": str(outdir), "key": f"shared-{uuid.uuid4().hex}",
+                "bundle": None, "shared": True}
+    key, data = make_bundle(outdir, plan)
+    return {"outdir": str(outdir), "key": key, "bundle": data, "shared": False}
+
+
+def _render_on(client, outdir: Path, plan, lens, table, done: list, todo: list[int],
+               stats: dict, t0: float, *, shared_dir: bool, quiet: bool,
+               worker_wait_s: float, on_sample, group_size: int | None) -> UnitSums:
+    """Render the samples ``todo`` on ``client``'s workers and return the composite's
+    sums, the units ``done`` (rendered before: resumed) added too; ``stats`` gets the
+    group size, bundle, workers and tasks (:func:`render_outdir_on_cluster`).  The
+    tasks left when it ends (an error, an interrupt) are cancelled and the workers'
+    replicas deleted."""
+    from tqdm import tqdm
+    futures, job = [], None
+    try:
+        _wait_for_workers(client, worker_wait_s)
+        size = _group_size(group_size, client, len(todo))
+        groups = chunk_groups(todo, size)
+        job = _job(outdir, plan, shared_dir)
+        stats.update(bundle_bytes=len(job["bundle"] or b""), group_size=size,
+                     groups=len(groups))
+        futures = _submit(client, job, groups, size)
+        stats["scatter_s"] = time.perf_counter() - t0 - stats["connect_s"]
+        stats["workers"] = len(client.nthreads())
+        stats["threads"] = sum(client.nthreads().values())
+        exposure_for(outdir, plan, lens, table)      # while the workers render
+        sums = UnitSums(plan.inputs.samples, unit_terms(outdir, plan, table, sample_sums))
+        for k0, k1 in done:
+            sums.add(k0, k1)                         # rendered before: resumed
+        with tqdm(total=len(todo), desc="lens samples", unit="sample", file=sys.stderr,
+                  disable=quiet or not sys.stderr.isatty()) as bar:
+            stats["tasks"] = _collect(client, futures, outdir, shared_dir, on_sample,
+                                      bar, sums)
+        return sums
+    finally:
+        if futures:
+            client.cancel(futures)
+        if job is not None:         # the workers' replica and loaded plan
+            _forget(client, job["key"])
 
 
 def convert_and_render_on_cluster(opts: ConvertOptions, scheduler, shared_dir: bool = False,
@@ -343,9 +368,9 @@ def render_frames_on_cluster(opts: ConvertOptions, focus_values: list[float], sc
                              group_size: int | None = None):
     """A focus pull (``povlens render --frames N --scheduler``): every frame converted
     here and its lens samples rendered on the cluster, one client for all frames
-    (:func:`povlens.rendering.frames.render_frames` with this frame renderer).
+    (:func:`povlens.rendering.focus_pull.render_frames` with this frame renderer).
     Returns the frames' records."""
-    from povlens.rendering.frames import render_frames
+    from povlens.rendering.focus_pull import render_frames
     client, owned = _client_of(scheduler, connect_timeout_s)
     try:
         def render_frame(frame_opts, on_plan=None, depth_probe=None, **_):

@@ -1,0 +1,189 @@
+"""Rendering a converted folder from start to image: the driver of ``povlens render``.
+
+:func:`render_outdir` renders what a folder lacks and composites: a pinhole or
+focal-blur plan's view (:mod:`povlens.rendering.views`), or a mesh plan's lens samples
+in this process (:mod:`povlens.rendering.mesh_samples`) and then their composite
+(:mod:`povlens.rendering.folder_composite`).  :func:`convert_and_render` converts first,
+and while ``--method auto`` probes the scene its likely choice starts: the first lens
+samples render in a thread (:class:`EarlyRender`) or the adaptive focal_blur view
+(:mod:`povlens.plan.speculative`).  Re-running skips what is done: an interrupted
+render resumes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import sys
+import threading
+from pathlib import Path
+
+from tqdm import tqdm
+
+from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.render_folder import RenderFolder
+from povlens.plan.schema import Plan, read_plan
+from povlens.rendering.folder_composite import composite_outdir
+from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
+from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, mark_batches_done, render_samples
+from povlens.rendering.views import render_view
+from povlens.util.files import write_text
+
+__all__ = ["render_outdir", "convert_and_render", "EarlyRender"]
+
+
+def _progress(total: int, desc: str, quiet: bool):
+    return tqdm(total=total, desc=desc, unit="sample", disable=quiet or not sys.stderr.isatty(),
+                file=sys.stderr)
+
+
+def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: bool = False,
+                  in_flight: int | None = None) -> Path:
+    """Render everything a converted folder needs and composite.
+
+    Mesh plans: every lens sample not yet rendered, in this process
+    (:func:`~povlens.rendering.mesh_samples.render_samples`: trace, write the mesh,
+    start its POV-Ray process, go on), with up to ``in_flight`` POV-Ray processes at
+    once (default :data:`~povlens.rendering.mesh_samples.POVRAY_IN_FLIGHT` per core,
+    ``jobs`` cores, default all).  One process
+    with the lens and pupil table in memory is faster than a worker process per
+    batch: a worker's Python start-up costs more than the tracing it would share
+    (docs/decisions/planning.md).  ``make -jN`` in the folder renders its batches
+    in parallel processes (``povlens render-batch``)."""
+    outdir = Path(outdir)
+    folder = RenderFolder(outdir)
+    plan = read_plan(outdir)
+    method = plan.inputs.method
+    if method != "mesh":
+        render_view(outdir, method)
+        return folder.image_exr
+    jobs = jobs or os.cpu_count() or 1
+    in_flight = in_flight or POVRAY_IN_FLIGHT * jobs
+    todo = [k for k in range(plan.inputs.samples) if not folder.sample_done(k)]
+    if todo:
+        lens = lens_for(plan)
+        table = pupil_table_for(outdir, plan, lens)
+
+        def samples():
+            yield from todo
+            # every sample is written and its POV-Ray started: the composite's
+            # exposure is computed while they run (not after)
+            exposure_for(outdir, plan, lens, table)
+
+        with _progress(len(todo), "lens samples", quiet) as bar:
+            timing = render_samples(plan, lens, table, outdir, 0, samples(),
+                                    in_flight=in_flight, on_done=lambda: bar.update(1))
+        write_text(folder.timing("render"), json.dumps(timing) + "\n")
+    mark_batches_done(outdir, plan)
+    composite_outdir(outdir)
+    return folder.image_exr
+
+
+class EarlyRender:
+    """Lens samples rendered in a thread of this process while
+    :func:`povlens.plan.convert.convert` goes on (its ``render_early``): those of a
+    provisional plan at first, then, after :meth:`extend`, those the final plan
+    adds, without draining the POV-Ray pipeline in between.  The lens and pupil
+    table are already in memory.  :meth:`wait` waits for the samples given so far
+    and raises what the render raised; :meth:`cancel` stops it (what it finished
+    stays)."""
+
+    def __init__(self, outdir: Path, plan: Plan, lens, table, in_flight: int, quiet: bool):
+        self._outdir = Path(outdir)
+        self._folder = RenderFolder(outdir)
+        self._stop = threading.Event()
+        self._more = threading.Condition()
+        self._closed = False
+        self._error: BaseException | None = None
+        self._plans = {k: plan for k in range(plan.inputs.samples)}
+        self._todo = [k for k in range(plan.inputs.samples) if not self._folder.sample_done(k)]
+        self._final = plan
+        self._lens, self._table = lens, table
+        self._bar = _progress(len(self._todo), "lens samples", quiet)
+        self._thread = threading.Thread(target=self._run, args=(lens, table, in_flight),
+                                        daemon=True)
+        self._thread.start()
+
+    def _samples(self):
+        i = 0
+        exposure_known = False
+        while True:
+            if i >= len(self._todo) and not exposure_known and not self._stop.is_set():
+                # nothing to write until the decision adds samples: the composite's
+                # exposure is computed now, while POV-Ray runs, instead of after
+                exposure_for(self._outdir, self._final, self._lens, self._table)
+                exposure_known = True
+            with self._more:
+                while i >= len(self._todo) and not self._closed and not self._stop.is_set():
+                    self._more.wait(0.05)
+                if i >= len(self._todo) or self._stop.is_set():
+                    return
+                k = self._todo[i]
+            i += 1
+            yield k
+
+    def _run(self, lens, table, in_flight):
+        try:
+            timing = render_samples(self._final, lens, table, self._outdir, 0, self._samples(),
+                                    in_flight=in_flight, stop=self._stop,
+                                    on_done=lambda: self._bar.update(1),
+                                    plan_for=lambda k: self._plans[k])
+            if timing["samples"]:
+                write_text(self._folder.timing("early"), json.dumps(timing) + "\n")
+            if not self._stop.is_set():
+                mark_batches_done(self._outdir, self._final)
+        except BaseException as e:      # handed to wait()
+            self._error = e
+        finally:
+            self._bar.close()
+
+    def extend(self, plan: Plan) -> None:
+        """Render also the samples ``plan`` (the final plan, more samples than the
+        provisional one) adds."""
+        with self._more:
+            new = [k for k in range(plan.inputs.samples) if k not in self._plans]
+            self._plans.update({k: plan for k in new})
+            self._todo += [k for k in new if not self._folder.sample_done(k)]
+            self._final = plan
+            self._bar.total = len(self._todo)
+            self._bar.refresh()
+            self._more.notify_all()
+
+    def wait(self) -> None:
+        with self._more:
+            self._closed = True
+            self._more.notify_all()
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+
+    def cancel(self) -> None:
+        self._stop.set()
+        with self._more:
+            self._more.notify_all()
+        self._thread.join()
+
+
+def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: bool = False,
+                       on_plan=None, depth_probe=None) -> tuple[Plan, Path]:
+    """What ``povlens render`` does: convert ``opts`` and render the folder
+    (:func:`render_outdir`).
+
+    With --method auto, the render auto is likely to choose starts while its depth
+    probe runs (``speculate`` of :func:`povlens.plan.convert.convert`): the adaptive
+    focal_blur view, or, when the lens alone rules out the views, the first lens
+    samples of the mesh render (``render_early``).  ``on_plan(plan)`` is called
+    between conversion and rendering; ``depth_probe`` goes to ``convert`` (a focus
+    pull's frames share one probe).  Returns (plan, path of image.exr)."""
+    jobs = jobs or os.cpu_count() or 1
+
+    def render_early(plan, lens, table):
+        return EarlyRender(Path(opts.outdir), plan, lens, table, POVRAY_IN_FLIGHT * jobs,
+                           quiet)
+
+    plan = convert(dataclasses.replace(opts, speculate=True), render_early=render_early,
+                   depth_probe=depth_probe)
+    if on_plan is not None:
+        on_plan(plan)
+    return plan, render_outdir(opts.outdir, jobs=jobs, quiet=quiet)

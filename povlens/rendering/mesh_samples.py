@@ -1,0 +1,335 @@
+"""The mesh method's lens samples: each traced, its ray mesh written and rendered by its
+own POV-Ray process, several in flight.
+
+Batch b of a mesh plan (``povlens render-batch``, make's target) and every sample of
+``povlens render`` (:mod:`povlens.rendering.driver`) go through :func:`render_samples`.
+Sample k's outputs (names: :class:`~povlens.plan.render_folder.RenderFolder`), each
+written under a temporary name and then renamed, so an interrupted run never leaves a
+half-written file at a final name:
+
+* its image (POV-Ray, linear EXR) and its per-pixel radiometric weights (float32; field
+  meshes: its pass mask instead, :mod:`povlens.rendering.field_samples`), or, when
+  every ray of its rows is blocked, the marker that it has no image (black, weight 0);
+* its ray mesh, written just before its POV-Ray process starts and deleted when the
+  render ends; samples are traced one at a time while earlier ones render (several
+  in flight, :data:`POVRAY_IN_FLIGHT`);
+* a batch's marker once all its samples are done (:func:`mark_batches_done`).
+
+Every POV-Ray run gets the user's POV-Ray options the plan records (library paths,
+clock, passthrough options: :func:`povlens.plan.options.povray_options_of`), so
+``make`` and ``povlens render-batch`` render as ``povlens render`` does; lens samples
+run without anti-aliasing whatever the options say (:data:`MESH_SWITCHES`).
+Re-running skips every sample that is done: that is how an interrupted render resumes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from povlens.errors import PovlensError, PovrayError
+from povlens.plan.options import povray_options_of
+from povlens.plan.render_folder import RenderFolder
+from povlens.plan.schema import Plan, PovraySettings, read_plan
+from povlens.pov.executable import find_povray
+from povlens.pov.mesh import write_ray_mesh
+from povlens.pov.povray_output import error_in_wrapper, povray_error_text
+from povlens.pov.process import (pixel_range_args, povray_command, povray_finished,
+                                 render_switches, start_povray)
+from povlens.pupil.rays import sample_points, sample_rays
+from povlens.rendering.field_samples import (placement_of, render_rows, sample_lens,
+                                             write_field_sample)
+from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
+from povlens.rendering.pixel_sampler import pixel_sampler
+from povlens.util.files import write_text
+from povlens.util.images import write_exr
+from povlens.util.signals import interrupts_deferred
+
+__all__ = ["render_samples", "render_batch", "sample_rows", "film_row_args",
+           "mark_batches_done", "POVRAY_IN_FLIGHT", "MESH_SWITCHES"]
+
+
+def sample_rows(plan: Plan, k: int) -> tuple[int, int]:
+    """Film rows [start, end) sample k renders (all rows unless the plan is adaptive)."""
+    return plan.rows_of_sample(k)
+
+
+def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
+                points: np.ndarray | None = None) -> bool:
+    """Write sample k's ray mesh and weights.
+
+    ``table`` is the lens sampler (the plan's exit-pupil table; any object with
+    the ``sample(film_xy, u)`` protocol of :func:`povlens.pupil.rays.sample_rays`
+    works).  ``points`` overrides the plan's (H, W, 4) sample points of sample k
+    (default: :func:`povlens.pupil.rays.sample_points`); :mod:`povlens.bench`
+    uses both to render with the baseline samplers and random points.  A plan
+    with field meshes writes its sample with
+    :func:`povlens.rendering.field_samples.write_field_sample` (no ``points``).
+    """
+    folder = RenderFolder(outdir)
+    inc = folder.sample_mesh(k)
+    if plan.field_mesh is not None:
+        if points is not None:
+            raise PovlensError("field-mesh samples share one pupil point per sample: "
+                               "they take no per-pixel sample points",
+                               "convert with --ray-mesh pixel")
+        if write_field_sample(plan, lens, table, outdir, k, inc):
+            return True
+        write_text(folder.sample_blocked(k), "%d %d\n" % plan.rows_of_sample(k))
+        return False
+    film = plan.film
+    placement = placement_of(plan)
+    inp = plan.inputs
+    if points is None:
+        points = sample_points(inp.samples, film.height_px, film.width_px, inp.seed)(k)
+    else:
+        points = np.array(points, dtype=np.float64)
+    if not inp.jitter:
+        points[..., :2] = 0.5  # pixel centres, as POV-Ray's perspective camera
+    table = pixel_sampler(plan, lens, table)    # the band with --dispersion; an iris's domain
+    if inp.dispersion:                           # sample k's wavelength
+        lens = sample_lens(plan, lens, k)
+    r0, r1 = sample_rows(plan, k)
+    rays = sample_rays(lens, plan.focus.film_distance_mm, film, table, placement, points,
+                       rows=(r0, r1))  # rows this sample does not render: no rays, weight 0
+    valid, weight = rays.valid, rays.weight
+    if not np.any(weight[r0:r1] > 0):
+        # every ray of its rows blocked: black, weight 0, nothing to render
+        write_exr(folder.sample_weight(k), np.zeros(weight.shape + (1,), dtype=np.float32))
+        write_text(folder.sample_blocked(k), f"{r0} {r1}\n")
+        return False
+    part = folder.partial(inc)
+    t = write_ray_mesh(part, "PovlensRays", rays.origin, rays.direction, valid,
+                       sink_centre=plan.sink_centre)
+    with open(part, "a") as f:
+        f.write(f"#declare PovlensTranslate = <{t[0]:.17g}, {t[1]:.17g}, {t[2]:.17g}>;\n")
+    os.replace(part, inc)
+    write_exr(folder.sample_weight(k), weight[..., None].astype(np.float32))
+    return True
+
+
+def film_row_args(povray: PovraySettings, rows: tuple[int, int]) -> list[str]:
+    """POV-Ray's +SR/+ER switches rendering only the film rows ``rows``.
+
+    Parameters
+    ----------
+    povray : the plan's POV-Ray settings (``drop_top_rows``, ``render_height``).
+    rows : film rows [r0, r1), 0 = top.
+
+    Returns
+    -------
+    list of str
+        Output row = film row + drop_top_rows (:func:`povlens.pov.process.pixel_range_args`);
+        the columns before ``drop_right_columns`` when there are such.
+    """
+    r0, r1 = rows
+    drop = povray.drop_top_rows
+    cols = []
+    if povray.drop_right_columns:       # field meshes: the last column is not traced
+        cols = pixel_range_args(0, povray.render_width - povray.drop_right_columns,
+                                povray.render_width, "col")
+    return cols + pixel_range_args(r0 + drop, r1 + drop, povray.render_height, "row")
+
+
+#: POV-Ray switches of a lens sample's render after the user's options: no
+#: anti-aliasing, which would take rays between pixels from the neighbouring pixels'
+#: mesh faces (the plan's notes say so when the user's options turn it on).
+MESH_SWITCHES = ("-A",)
+
+#: POV-Ray processes in flight per core (``render_outdir``) or per batch (``povlens
+#: render-batch``): each run idles ~0.6 s in start-up, so several overlap on a core
+#: (measurements: docs/decisions/planning.md, "POV-Ray processes in flight").
+POVRAY_IN_FLIGHT = 4
+
+class _SampleRenders:
+    """POV-Ray processes rendering single lens samples of a batch, at most
+    ``limit`` at once.  :meth:`start` returns once a slot is free; :meth:`finish`
+    waits for all.  Each sample renders into its own temporary folder (stderr to a
+    file there, so a chatty scene cannot fill a pipe) and is renamed to
+    ``sample_KKKK.exr`` when POV-Ray succeeds; its mesh is deleted then."""
+
+    def __init__(self, plan: Plan, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT,
+                 on_done=None):
+        self.plan, self.folder, self.batch = plan, RenderFolder(outdir), batch
+        self.on_done = on_done
+        self.samples = self.folder.samples
+        self.limit = max(1, int(limit))
+        self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
+        self.povray_s = 0.0
+        self.povray_options = povray_options_of(plan.inputs)   # the user's, checked once
+
+    def start(self, k: int) -> None:
+        while len(self.running) >= self.limit:
+            self._reap(block=True)
+        pv = self.plan.povray
+        pov = self.folder.batch_wrapper(self.batch)
+        tmp = Path(tempfile.mkdtemp(prefix=self.folder.sample_temp_prefix(k), dir=self.samples))
+        try:        # until the process is tracked, the folder is this call's to remove
+            rel = os.path.relpath(tmp, self.samples)
+            switches = render_switches(
+                "f.exr", pv.render_width, pv.render_height, threads=1,
+                library_paths=[Path(self.plan.inputs.scene).parent],
+                povray_options=self.povray_options,
+                extra_args=[*MESH_SWITCHES, f"Declare=PovlensFrame={k}",
+                            *film_row_args(pv, render_rows(self.plan, k))])
+            cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
+            with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:
+                proc = start_povray(cmd, self.samples, err)
+                self.running[k] = (proc, tmp, time.perf_counter())   # abort() sees it
+        except BaseException:
+            if k in self.running:
+                raise           # tracked: abort() stops it and removes the folder
+            if "proc" in locals():
+                proc.kill()
+                proc.wait()
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+
+    def _finished(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
+        """POV-Ray exited, or wrote and closed its image (it then idles ~0.3 s
+        before exiting: :func:`povlens.pov.process.povray_finished`)."""
+        return povray_finished(proc, tmp / "f.exr", time.perf_counter() - self.running[k][2])
+
+    def _reap(self, block: bool) -> None:
+        while True:
+            done = [k for k, (p, tmp, _) in self.running.items() if self._finished(k, p, tmp)]
+            if done or not block:
+                break
+            time.sleep(0.005)
+        for k in done:
+            proc, tmp, t0 = self.running.pop(k)
+            self.povray_s += time.perf_counter() - t0
+            try:
+                self._collect(k, proc, tmp)
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+                self.folder.sample_mesh(k).unlink(missing_ok=True)
+            if self.on_done is not None:
+                self.on_done()
+
+    def _collect(self, k: int, proc: subprocess.Popen, tmp: Path) -> None:
+        pov = self.folder.batch_wrapper(self.batch)
+        if proc.returncode != 0:
+            stderr = (tmp / "stderr.txt").read_text(errors="replace")
+            in_wrapper = error_in_wrapper(pov, self.samples, povray_error_text(stderr, ""))
+            if in_wrapper is not None:
+                raise PovrayError(*in_wrapper)
+            raise PovrayError(f"POV-Ray failed on {pov}, lens sample {k} (exit status "
+                              f"{proc.returncode}):\n" + povray_error_text(stderr, ""),
+                              "fix the scene, or run 'make' in the folder to see the command")
+        out = tmp / "f.exr"
+        if not out.exists():
+            raise PovrayError(f"POV-Ray rendered lens sample {k} of {pov} but wrote no image",
+                              "check free disk space and POV-Ray's permitted paths")
+        os.replace(out, self.folder.sample_image(k))
+
+    def finish(self) -> None:
+        while self.running:
+            self._reap(block=True)
+
+    def abort(self) -> None:
+        """Stop every running process (an error, an interrupt, a cancelled guess).
+        SIGKILL: what a sample's POV-Ray holds is its temporary folder, deleted here,
+        and SIGTERM would run POV-Ray's slow shutdown (docs/decisions/planning.md)."""
+        for p, _, _ in self.running.values():
+            p.kill()
+        for k, (p, tmp, _) in list(self.running.items()):
+            p.wait()
+            shutil.rmtree(tmp, ignore_errors=True)
+            self.folder.sample_mesh(k).unlink(missing_ok=True)
+        self.running.clear()
+
+
+def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: int,
+                   samples, points=None, in_flight: int = POVRAY_IN_FLIGHT,
+                   stop=None, on_done=None, plan_for=None) -> dict:
+    """Trace, write and render lens samples ``samples`` of batch ``batch``, pipelined.
+
+    For each sample in turn: trace its rays and write its mesh and weights
+    (:func:`_write_mesh`), then start its POV-Ray process and go on to the next
+    sample while it runs (at most ``in_flight`` at once).  Samples whose rays are
+    all blocked are not rendered.  ``sampler`` is the lens sampler (normally the
+    plan's exit-pupil table); ``points(k)`` overrides the plan's sample points
+    (:mod:`povlens.bench`).  ``stop``: a :class:`threading.Event`; once set, no
+    further sample starts and the running ones are stopped.  ``on_done()`` is called
+    as each sample is finished (progress).  ``samples`` may be any iterable of
+    sample numbers (a generator that waits for more:
+    :class:`povlens.rendering.driver.EarlyRender`), and
+    ``plan_for(k)`` the plan to trace sample k with (default ``plan``; plans that
+    differ only in the sample count give the same sample k).  Returns timings: {samples, blocked,
+    rays_and_meshes_s (Python), povray_s (summed over the overlapping processes),
+    wall_s}.
+    """
+    outdir = Path(outdir)
+    t0 = time.perf_counter()
+    t_mesh = 0.0
+    blocked = 0
+    queue = _SampleRenders(plan, outdir, batch, in_flight, on_done)
+    seen: list[int] = []
+    try:
+        for k in samples:
+            if stop is not None and stop.is_set():
+                queue.abort()
+                break
+            seen.append(k)
+            t = time.perf_counter()
+            ok = _write_mesh(plan if plan_for is None else plan_for(k), lens, sampler, outdir,
+                             k, points=None if points is None else points(k))
+            t_mesh += time.perf_counter() - t
+            if ok:
+                queue.start(k)
+            else:
+                blocked += 1
+                if on_done is not None:
+                    on_done()
+            queue._reap(block=False)
+        if stop is not None and stop.is_set():
+            queue.abort()   # stopped while waiting for more samples: do not wait for these
+        else:
+            queue.finish()
+    except BaseException:
+        queue.abort()
+        raise
+    finally:
+        for k in seen:
+            RenderFolder(outdir).sample_mesh(k).unlink(missing_ok=True)
+    return {"samples": len(seen), "blocked": blocked, "rays_and_meshes_s": t_mesh,
+            "povray_s": queue.povray_s, "wall_s": time.perf_counter() - t0}
+
+
+def render_batch(outdir: str | os.PathLike, batch: int,
+                 in_flight: int = POVRAY_IN_FLIGHT) -> list[int]:
+    """Render batch ``batch`` of a mesh plan; returns the samples it rendered (resumes)."""
+    outdir = Path(outdir)
+    plan = read_plan(outdir)
+    if plan.inputs.method != "mesh":
+        raise PovlensError(f"{outdir} was converted with the {plan.inputs.method} "
+                           f"method; it has no sample batches", "use 'povlens render-view'")
+    batches = plan.batches
+    if not 0 <= batch < len(batches):
+        raise PovlensError(f"batch {batch}: {outdir} has batches 0..{len(batches) - 1}")
+    folder = RenderFolder(outdir)
+    todo = [k for k in batches[batch] if not folder.sample_done(k)]
+    if todo:
+        lens = lens_for(plan)
+        table = pupil_table_for(outdir, plan, lens)
+        exposure_for(outdir, plan, lens, table)
+        timing = render_samples(plan, lens, table, outdir, batch, todo, in_flight=in_flight)
+        write_text(folder.batch_timing(batch), json.dumps(timing) + "\n")
+    folder.mark_batch_done(batch, batches[batch])
+    return todo
+
+
+def mark_batches_done(outdir: str | os.PathLike, plan: Plan) -> None:
+    """Write the marker (make's target) of each batch whose samples are done."""
+    folder = RenderFolder(outdir)
+    for b, ks in enumerate(plan.batches):
+        if all(folder.sample_done(k) for k in ks):
+            folder.mark_batch_done(b, ks)
