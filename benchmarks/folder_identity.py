@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import re
 import pathlib
 import subprocess
@@ -54,8 +55,9 @@ def _content(path: pathlib.Path, folder: pathlib.Path) -> bytes:
     if path.suffix == ".npz":
         import numpy as np
         with np.load(path, allow_pickle=False) as z:
-            return b"".join(k.encode() + _text(_bytes(z[k]), folder) for k in sorted(z.files))
-    return _text(path.read_bytes(), folder)
+            return b"".join(k.encode() + _text(_bytes(z[k]), folder, path.parent)
+                            for k in sorted(z.files))
+    return _text(path.read_bytes(), folder, path.parent)
 
 
 def _bytes(a) -> bytes:
@@ -63,10 +65,12 @@ def _bytes(a) -> bytes:
     return "\n".join(map(str, a.ravel())).encode() if a.dtype.kind == "U" else a.tobytes()
 
 
-def _text(data: bytes, folder: pathlib.Path) -> bytes:
-    """``data`` without the folder's and the tree's paths and without timings
+def _text(data: bytes, folder: pathlib.Path, here: pathlib.Path) -> bytes:
+    """``data`` without the folder's and the tree's paths (absolute, or relative to
+    ``here``, the file's folder: a wrapper's ``#include``) and without timings
     (``"seconds": ...``, ``"build_time_s": ...``)."""
     data = data.replace(str(folder).encode(), b"<OUT>").replace(str(HERE).encode(), b"<TREE>")
+    data = data.replace(os.path.relpath(HERE, here).encode(), b"<TREE>")
     return re.sub(rb'"(seconds|\w+_time_s)": [0-9.e+-]+', rb'"\1": 0', data)
 
 
@@ -118,7 +122,7 @@ def main() -> int:
         d = diff(*(json.loads(pathlib.Path(p).read_text()) for p in a.diff))
         print("\n".join(d) if d else "identical")
         return 1 if d else 0
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory(prefix="povlens-identity.") as tmp:
         root = pathlib.Path(a.root or tmp)
         result = render_all(root)
     pathlib.Path(a.out).write_text(json.dumps(result, indent=1, sort_keys=True))
