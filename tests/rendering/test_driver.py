@@ -1,4 +1,6 @@
-"""convert / render / composite on the bundled scenes with the real POV-Ray, small images."""
+"""povlens render from start to image (povlens.rendering.driver): the command line,
+interrupts, the lens samples and views --method auto starts while it probes.  With the
+real POV-Ray, small images."""
 
 import json
 import os
@@ -10,24 +12,13 @@ import numpy as np
 import pytest
 
 from povlens.plan.convert import ConvertOptions, convert
-from povlens.plan.schema import read_plan
-from povlens.util.images import read_image
 from povlens.rendering.driver import render_outdir
-from povlens.rendering.folder_composite import composite_outdir
-from povlens.rendering.mesh_samples import render_batch
-from povlens.rendering.views import render_view
+from povlens.util.images import read_image
 
 from conftest import ROOT
 
 SCENES = ROOT / "scenes"
 pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
-
-
-def povlens(*args, env=None, cwd=ROOT):
-    e = dict(os.environ)
-    e.update(env or {})
-    return subprocess.run([sys.executable, "-m", "povlens", *args], capture_output=True,
-                          text=True, cwd=cwd, env=e, timeout=600)
 
 
 def opts(tmp_path, **kw):
@@ -37,85 +28,11 @@ def opts(tmp_path, **kw):
     return ConvertOptions(**base)
 
 
-def test_convert_writes_plan_wrappers_and_makefile(tmp_path):
-    before = (SCENES / "paper.pov").read_bytes()
-    plan = convert(opts(tmp_path))
-    out = tmp_path / "out"
-    for name in ("plan.json", "pinhole.pov", "focal_blur.pov", "Makefile",
-                 "samples/batch_000.pov", "samples/batch_001.pov"):
-        assert (out / name).exists(), name
-    saved = json.loads((out / "plan.json").read_text())
-    assert saved["batches"] == [[0, 2], [1, 3]]        # dealt round-robin
-    cam = saved["povray_camera"]
-    # focal_blur aperture is twice the entrance-pupil diameter, in scene units (m)
-    assert cam["aperture"] == pytest.approx(2 * 24.8051e-3, rel=1e-4)
-    assert saved["model_error"]["max_distortion_px"] >= 0
-    assert "#include" in (out / "focal_blur.pov").read_text()
-    # the scene itself is untouched
-    assert (SCENES / "paper.pov").read_bytes() == before
-    assert plan.focus.film_distance_mm > plan.lens.efl_mm * 0.7
-
-
-def test_make_renders_and_a_second_make_does_nothing(tmp_path):
-    convert(opts(tmp_path))
-    out = tmp_path / "out"
-    r = subprocess.run(["make", "-C", str(out), "-j2"], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
-    img = read_image(out / "image.exr")
-    assert img.shape == (36, 48, 3) and np.isfinite(img).all() and img.mean() > 0.05
-    assert (out / "image.png").exists()
-    again = subprocess.run(["make", "-C", str(out)], capture_output=True, text=True)
-    assert again.returncode == 0 and "Nothing to be done" in again.stdout
-
-
-def test_interrupted_render_resumes_to_the_same_image(tmp_path):
-    full = tmp_path / "full"
-    convert(opts(tmp_path, outdir=str(full)))
-    render_outdir(full, jobs=1, quiet=True)
-    reference = read_image(full / "image.exr")
-
-    part = tmp_path / "part"
-    convert(opts(tmp_path, outdir=str(part)))
-    render_batch(part, 0)                              # the run stops after one batch ...
-    (part / "samples" / "sample_0002.exr").unlink()    # ... and one sample of it is lost
-    render_outdir(part, jobs=2, quiet=True)            # re-run
-    np.testing.assert_array_equal(read_image(part / "image.exr"), reference)
-
-
-def test_tiny_stop_mesh_render_matches_the_pinhole_render(tmp_path):
-    o = opts(tmp_path, width=640, height=480, samples=8, batch_size=8, stop_diameter_mm=2.0,
-             jitter=False)
-    convert(o)
-    out = tmp_path / "out"
-    render_outdir(out, jobs=2, quiet=True)
-    # without vignetting (cos^4 falloff is physical, and a pinhole has none)
-    mesh = composite_outdir(out, vignetting=False, write=False)
-    pin = read_image(render_view(out, "pinhole"))[..., :3]
-    diff = np.abs(mesh - pin).mean(axis=2)
-    # Same view pixel for pixel, up to the real lens's residual geometry against the
-    # fitted perspective (its distortion, up to 2 px at the frame's corners at this
-    # size, under 0.05 px in the central quarter used here, and rays spread over a
-    # 2 mm stop), which flips pixels only where a hard checker edge crosses the pixel
-    # centre, and the aliased checker floor near the horizon.
-    c = diff[180:300, 240:400]
-    assert np.median(c) < 0.01
-    assert (c > 0.2).mean() < 0.05
-    # the field meshes were certified to 0.05 px
-    assert read_plan(out).field_mesh.max_ray_error_px <= 0.05
-    # a view shifted by one pixel is clearly worse, so the test can fail (vertically:
-    # the floor's checker rows near the horizon show it; per-pixel meshes give the same
-    # numbers, 3.1 % against 22-25 % of the pixels)
-    for shifted in (mesh[1:] - pin[:-1], mesh[:-1] - pin[1:]):
-        assert (np.abs(shifted).mean(axis=2)[180:300, 240:400] > 0.2).mean() > 4.0 * (c > 0.2).mean()
-
-
-def test_focal_blur_method_renders_one_image(tmp_path):
-    convert(opts(tmp_path, method="focal-blur", samples=7))
-    out = tmp_path / "out"
-    render_outdir(out, quiet=True)
-    img = read_image(out / "image.exr")
-    assert img.shape[:2] == (36, 48) and np.isfinite(img).all()
-    assert "blur_samples 7, 7" in (out / "focal_blur.pov").read_text()
+def povlens(*args, env=None, cwd=ROOT):
+    e = dict(os.environ)
+    e.update(env or {})
+    return subprocess.run([sys.executable, "-m", "povlens", *args], capture_output=True,
+                          text=True, cwd=cwd, env=e, timeout=600)
 
 
 def test_cli_render_and_errors(tmp_path):
@@ -158,41 +75,6 @@ def test_cli_render_and_errors(tmp_path):
     assert r.returncode == 3 and "POVLENS_POVRAY" in r.stderr and "Traceback" not in r.stderr
 
 
-def test_changed_inputs_drop_stale_samples_and_exposure(tmp_path):
-    convert(opts(tmp_path, samples=2, batch_size=2))
-    out = tmp_path / "out"
-    render_outdir(out, jobs=1, quiet=True)
-    assert (out / "exposure.txt").exists() and (out / "pupil.npz").exists()
-    e_f2 = float((out / "exposure.txt").read_text())
-    convert(opts(tmp_path, samples=2, batch_size=2, f_number=4.0))   # the stop changed
-    assert not (out / "exposure.txt").exists()
-    assert not list((out / "samples").glob("sample_*.exr"))
-    render_outdir(out, jobs=1, quiet=True)
-    # exposure = 1 / (E/L) at the centre, and E/L goes as 1/N^2: f/2.03 -> f/4 is ~3.9x
-    assert float((out / "exposure.txt").read_text()) == pytest.approx(e_f2 * (4.0 / 2.03) ** 2,
-                                                                      rel=0.15)
-
-
-def test_samples_in_flight_render_the_same_image_as_one_at_a_time(tmp_path):
-    one = tmp_path / "one"
-    convert(opts(tmp_path, outdir=str(one), samples=6, batch_size=6))
-    render_batch(one, 0, in_flight=1)
-    many = tmp_path / "many"
-    convert(opts(tmp_path, outdir=str(many), samples=6, batch_size=6))
-    render_batch(many, 0, in_flight=6)
-    rendered = 0
-    for k in range(6):
-        name = f"samples/sample_{k:04d}.exr"
-        assert (many / name).exists() == (one / name).exists()   # or both all blocked
-        if (one / name).exists():
-            np.testing.assert_array_equal(read_image(many / name), read_image(one / name))
-            rendered += 1
-    assert rendered >= 4
-    # the meshes and the per-sample temporary folders are gone
-    assert not list((many / "samples").glob("*.inc"))
-    assert not list((many / "samples").glob(".sample_*"))
-
-
 def _processes_in(folder) -> list[int]:
     """PIDs of processes whose working directory is ``folder`` (POV-Ray runs there)."""
     pids = []
@@ -233,30 +115,6 @@ def test_interrupting_render_stops_povray_and_resumes(tmp_path):
     convert(opts(tmp_path, outdir=str(full), samples=48, batch_size=24, method="mesh"))
     render_outdir(full, quiet=True)
     np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(full / "image.exr"))
-
-
-def test_more_samples_reuse_the_rendered_ones(tmp_path):
-    """Raising N keeps samples 0..N-1 (Sobol point k does not depend on N): only the
-    new samples are traced and rendered, and the image equals a fresh render."""
-    out = tmp_path / "out"
-    convert(opts(tmp_path, samples=3, batch_size=3))
-    render_outdir(out, jobs=1, quiet=True)
-    s = out / "samples"
-    before = {k: (s / f"sample_{k:04d}.exr").stat().st_mtime_ns for k in range(3)}
-    convert(opts(tmp_path, samples=5, batch_size=5))
-    assert not (out / "image.exr").exists()
-    assert (out / "exposure.txt").exists()
-    rendered = render_batch(out, 0)
-    assert rendered == [3, 4]
-    assert {k: (s / f"sample_{k:04d}.exr").stat().st_mtime_ns for k in range(3)} == before
-    composite_outdir(out)
-    fresh = tmp_path / "fresh"
-    convert(opts(tmp_path, outdir=str(fresh), samples=5, batch_size=5))
-    render_outdir(fresh, jobs=1, quiet=True)
-    np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(fresh / "image.exr"))
-    # a change that alters every sample (the seed) drops them all
-    convert(opts(tmp_path, samples=5, batch_size=5, seed=3))
-    assert not list(s.glob("sample_*.exr")) and not (out / "exposure.txt").exists()
 
 
 @pytest.mark.parametrize("lens, focus, film_mm, tol", [("fisheye.10mm", 4.0, 35.0, 0.5),
@@ -380,23 +238,3 @@ def test_a_cancelled_early_render_leaves_no_povray_and_resumes(tmp_path):
     convert(opts(tmp_path, outdir=str(full), samples=24, batch_size=None))
     render_outdir(full, quiet=True)
     np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(full / "image.exr"))
-
-
-def test_a_damaged_pass_mask_is_a_clear_error_naming_the_file(tmp_path):
-    """Field-mesh samples keep their pass mask (the weights follow from it); a
-    damaged one stops the composite with the file's name, not a traceback or a
-    silently wrong image."""
-    from povlens.errors import PovlensError
-    convert(opts(tmp_path, samples=2, batch_size=2))
-    out = tmp_path / "out"
-    render_outdir(out, jobs=2, quiet=True)
-    masks = sorted((out / "samples").glob("sample_*.mask.npy"))
-    assert len(masks) == 2 and not list((out / "samples").glob("*.weight.exr"))
-    good = composite_outdir(out, write=False)
-    assert np.isfinite(good).all() and good.max() > 0
-    masks[0].write_bytes(b"not a mask")
-    with pytest.raises(PovlensError, match=masks[0].name):
-        composite_outdir(out, write=False)
-    np.save(masks[0], np.zeros((3, 1), np.uint8))       # the wrong size
-    with pytest.raises(PovlensError, match="mask"):
-        composite_outdir(out, write=False)
