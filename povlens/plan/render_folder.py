@@ -3,27 +3,27 @@ of the small files, in one place.
 
 A render folder (``povlens convert -o OUTDIR``) holds
 
-=====================================  ==============================================
-``plan.json``                          the plan (:mod:`povlens.plan.schema`)
-``pupil.npz``                          the exit-pupil table (:mod:`povlens.pupil.storage`)
-``pinhole.pov``, ``focal_blur.pov``    the views' wrappers (:mod:`povlens.plan.folder_writer`)
-``Makefile``                           ``make -C OUTDIR -j2`` renders and composites
-``view-<view>.exr``                    a view as POV-Ray rendered it
-``.speculative-focal-blur.pov/.exr``   ``--method auto``'s guessed view, while it runs
-``exposure.txt``                       the composite's exposure 1 / (E/L)(0)
-``illumination.json``                  the relative illumination of a field-mesh composite
-``image.exr``, ``image.png``           the image (linear float; sRGB preview)
-``samples/batch_BBB.pov``              the mesh method's batch wrappers
-``samples/batch_BBB.done``             make's marker: batch b is rendered
-``samples/sample_KKKK.exr``            lens sample k as POV-Ray rendered it
-``samples/sample_KKKK.weight.exr``     its per-pixel radiometric weights (per-pixel meshes)
-``samples/sample_KKKK.mask.npy``       its pass mask (field meshes, bits packed by row)
+========================================  =======================================================
+``plan.json``                             the plan (:mod:`povlens.plan.schema`)
+``pupil.npz``                             the exit-pupil table (:mod:`povlens.pupil.storage`)
+``pinhole.pov``, ``focal_blur.pov``       the views' wrappers (:mod:`povlens.plan.folder_writer`)
+``Makefile``                              ``make -C OUTDIR -j2`` renders and composites
+``view-<view>.exr``                       a view as POV-Ray rendered it
+``.speculative-focal-blur.pov/.exr``      ``--method auto``'s guessed view, while it runs
+``exposure.txt``                          the composite's exposure 1 / (E/L)(0)
+``illumination.json``                     the relative illumination of a field-mesh composite
+``image.exr``, ``image.png``              the image (linear float; sRGB preview)
+``samples/batch_BBB.pov``                 the mesh method's batch wrappers
+``samples/batch_BBB.done``                make's marker: batch b is rendered
+``samples/sample_KKKK.exr``               lens sample k as POV-Ray rendered it
+``samples/sample_KKKK.weight.exr``        its per-pixel radiometric weights (per-pixel meshes)
+``samples/sample_KKKK.mask.npy``          its pass mask (field meshes, bits packed by row)
 ``samples/sample_KKKK.transmission.npy``  its mask stop's transmission (grey masks)
-``samples/sample_KKKK.blocked``        marker: every ray of its rows is blocked
-``samples/sample_KKKK.inc``            its ray mesh, while it renders
-``samples/group_K0_K1.npz``            partial sums of samples k0 .. k1-1 (a cluster)
-``samples/*.timing.json``              timings (batches, the render, early samples)
-=====================================  ==============================================
+``samples/sample_KKKK.blocked``           marker: every ray of its rows is blocked
+``samples/sample_KKKK.inc``               its ray mesh, while it renders
+``samples/group_K0_K1.npz``               partial sums of samples k0 .. k1-1 (a cluster)
+``samples/*.timing.json``                 timings (batches, the render, early samples)
+========================================  =======================================================
 
 and a focus pull's folder (:mod:`povlens.rendering.focus_pull`) holds a render folder
 per frame (``frame-NNNN/``), the frames' images ``image.NNNN.exr`` / ``.png``, its
