@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -16,12 +17,15 @@ import numpy as np
 
 from povlens.lens.focus import FocusResult, UNITS_MM, focus as focus_mm
 from povlens.lens.prescription import LensPrescription, read_lens as read_lens_file
+from povlens.errors import ParameterError
 from povlens.plan.convert import convert as convert_options
-from povlens.plan.options import ConvertOptions
+from povlens.plan.focus_series import FocusPull, focus_series, parse_focus
+from povlens.plan.options import ConvertOptions, DaskOptions
 from povlens.plan.schema import Plan
 
 __all__ = ["read_lens", "focus", "convert", "render", "composite", "compare", "RenderResult",
-           "import_lens", "render_frames", "FramesResult"]
+           "import_lens", "render_frames", "FramesResult", "convert_frames", "focus_distances",
+           "renderer_for", "render_batch", "render_view"]
 
 
 def read_lens(name_or_path: str | os.PathLike) -> LensPrescription:
@@ -71,27 +75,48 @@ def focus(lens: LensPrescription | str | os.PathLike, distance: float,
         real rays, the RMS spot and the closest focus distance.
     """
     if units not in UNITS_MM:
-        from povlens.errors import ParameterError
         raise ParameterError("units", units, f"units={units!r}: unknown unit",
                              f"use one of {', '.join(sorted(UNITS_MM))}")
     return focus_mm(_as_lens(lens), float(distance) * UNITS_MM[units])
 
 
-def _options(scene, lens, focus_distance, outdir, overrides: dict[str, Any]) -> ConvertOptions:
-    known = {f.name for f in dataclasses.fields(ConvertOptions)}
-    unknown = sorted(set(overrides) - known)
-    if unknown:
-        from povlens.errors import ParameterError
-        raise ParameterError(unknown[0], overrides[unknown[0]],
-                             f"{unknown[0]!r} is not an option of a conversion",
-                             f"known options: {', '.join(sorted(known))}")
-    return ConvertOptions(scene=str(scene), lens=str(lens),
-                          focus=None if focus_distance is None else float(focus_distance),
-                          outdir=str(outdir), **overrides)
+def _focus_value(focus):
+    """One focus distance: a number, text (``"4"``), or None (from the scene)."""
+    if focus is None or not isinstance(focus, str):
+        return focus
+    spec = parse_focus(focus)
+    if isinstance(spec, FocusPull):
+        raise ParameterError("focus", focus, f"focus={focus} is a focus pull: one render "
+                             f"takes one distance", "render a pull with render_frames")
+    return spec
+
+
+def _options(scene, lens, outdir, focus, options: dict[str, Any]) -> ConvertOptions:
+    return ConvertOptions.of(scene, lens, outdir, focus=_focus_value(focus), **options)
+
+
+def focus_distances(focus, frames: int | None = None) -> list[float] | None:
+    """The focus distance of each frame of a focus pull, or None for one focus.
+
+    Parameters
+    ----------
+    focus : str, float, (A, B) tuple or list of float
+        Text as ``--focus`` takes it (``"4"``, ``"2:6"``, ``"1,2,4"``), one distance,
+        a pull ``(A, B)`` or a list of distances (scene units).
+    frames : int, optional
+        Frames of a pull (at least 2); with a list, its length if given.
+
+    Returns
+    -------
+    list of float or None
+        None when ``focus`` is one distance and ``frames`` is None.
+    """
+    spec = parse_focus(focus) if isinstance(focus, str) else focus
+    return focus_series(spec, frames)
 
 
 def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | os.PathLike,
-            focus: float | None = None, method: str = "auto", **options) -> Plan:
+            focus: float | str | None = None, **options) -> Plan:
     """Write a render folder for ``scene`` through ``lens`` (no rendering).
 
     Parameters
@@ -108,12 +133,11 @@ def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | 
         ``look_at``, else what the depth probe sees at the frame's centre, or at
         output pixel ``focus_at=(column, row)`` (:mod:`povlens.plan.autofocus`);
         ``plan.inputs.focus_from`` says which.
-    method : {"auto", "pinhole", "focal-blur", "mesh"}
-        How the lens is rendered; ``auto`` measures the scene and chooses.
     **options
-        Any field of :class:`povlens.plan.options.ConvertOptions` (``samples``,
-        ``width``, ``height``, ``f_number``, ``units``, ``tolerance_px``, ...), among
-        them POV-Ray's own options for every POV-Ray run of the scene:
+        Any option of :mod:`povlens.plan.options` by name (``method``, ``samples``,
+        ``width``, ``height``, ``f_number``, ``units``, ``tolerance_px``, ...; the
+        command line's ``povlens convert --help`` lists them with their defaults),
+        among them POV-Ray's own options for every POV-Ray run of the scene:
         ``library_paths`` (folders, POV-Ray's ``+L``), ``clock`` (``+K``) and
         ``povray_options`` (switches or INI options, e.g. ``("+A0.3",)``).
 
@@ -123,34 +147,68 @@ def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | 
     -------
     Plan
         The plan written to ``outdir/plan.json``.
+
+    Raises
+    ------
+    ParameterError
+        An unknown option, or a value its option refuses; names the option.
     """
-    return convert_options(_options(scene, lens, focus, outdir,
-                                    {"method": method, **options}))
+    return convert_options(_options(scene, lens, outdir, focus, options))
 
 
-def _scheduler_of(scheduler, shared_dir: bool, group_size: int | None):
-    """The scheduler to render on (the argument, else ``POVLENS_SCHEDULER``, else None:
-    here); ``shared_dir`` and ``group_size`` need one."""
-    from povlens.errors import ParameterError
-    scheduler = scheduler or os.environ.get("POVLENS_SCHEDULER") or None
-    if scheduler is None and (shared_dir or group_size is not None):
-        name, given = ("shared_dir", "True") if shared_dir else ("group_size", "...")
-        raise ParameterError(name, shared_dir or group_size, f"{name}={given} needs 'scheduler'",
+def convert_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
+                   outdir: str | os.PathLike, focus, frames: int | None = None,
+                   **options) -> list:
+    """Write the render folders of a focus pull, one per frame (no rendering).
+
+    Parameters are those of :func:`render_frames` without the rendering ones.
+
+    Returns
+    -------
+    list
+        One record per frame (focus, film distance, field of view, method, folder);
+        ``outdir/frames.json`` indexes them and ``outdir/Makefile`` renders them.
+    """
+    from povlens.rendering.focus_pull import convert_frames as convert_pull
+    values = _pull(focus, frames)
+    return convert_pull(_options(scene, lens, outdir, values[0], options), values)
+
+
+def renderer_for(scheduler: str | None = None, shared_dir: bool = False,
+                 group_size: int | None = None,
+                 scheduler_timeout_s: float = DaskOptions.scheduler_timeout_s,
+                 jobs: int | None = None):
+    """Where a render runs: on this machine, or on a Dask cluster.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of a Dask scheduler (``tcp://host:8786``); default: the environment's
+        ``POVLENS_SCHEDULER``, else render here.
+    shared_dir, group_size, scheduler_timeout_s : the Dask options
+        (:class:`~povlens.plan.options.DaskOptions`); ``shared_dir`` and
+        ``group_size`` need a scheduler.
+    jobs : int, optional
+        Here: POV-Ray cores (default: the number of cores).
+
+    Returns
+    -------
+    LocalRenderer or DaskRenderer
+        ``render(opts, quiet, on_plan)`` and ``render_frames(opts, values, quiet,
+        on_plan)``.
+    """
+    dask = DaskOptions(scheduler=scheduler or os.environ.get("POVLENS_SCHEDULER") or None,
+                       shared_dir=shared_dir, group_size=group_size,
+                       scheduler_timeout_s=scheduler_timeout_s)
+    if dask.scheduler is not None:
+        from povlens.cluster.client import DaskRenderer
+        return DaskRenderer(dask)
+    if shared_dir or group_size is not None:
+        name, given = ("shared_dir", "True") if shared_dir else ("group_size", group_size)
+        raise ParameterError(name, given, f"{name}={given} needs 'scheduler'",
                              f"give the scheduler's address, or leave out '{name}'")
-    return scheduler
-
-
-def _render_overrides(method, samples, width, height, options) -> dict:
-    """The :class:`ConvertOptions` fields a render call sets (a given ``samples`` is kept,
-    not chosen by ``auto``)."""
-    overrides = {"method": method, **options}
-    if samples is not None:
-        overrides.update(samples=int(samples), auto_samples=False)
-    if width is not None:
-        overrides["width"] = int(width)
-    if height is not None:
-        overrides["height"] = int(height)
-    return overrides
+    from povlens.rendering.driver import LocalRenderer    # loads OpenImageIO: when needed
+    return LocalRenderer(jobs)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -163,22 +221,26 @@ class RenderResult:
 
 
 def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | os.PathLike,
-           focus: float | None = None, method: str = "auto", samples: int | None = None,
-           width: int | None = None, height: int | None = None, jobs: int | None = None,
-           progress: bool = False, scheduler: str | None = None, shared_dir: bool = False,
-           group_size: int | None = None, **options) -> RenderResult:
+           focus: float | str | None = None, progress: bool = False,
+           on_plan: Callable[[Plan], None] | None = None, renderer=None,
+           jobs: int | None = None, scheduler: str | None = None, shared_dir: bool = False,
+           group_size: int | None = None,
+           scheduler_timeout_s: float = DaskOptions.scheduler_timeout_s,
+           **options) -> RenderResult:
     """Convert ``scene`` and render it through ``lens`` with POV-Ray.
 
-    Parameters are those of :func:`convert`, plus:
+    Parameters are those of :func:`convert` (``samples``: by default ``auto``
+    chooses, the fixed methods use 16), plus:
 
-    samples : int, optional
-        Lens samples per pixel; by default ``auto`` chooses, the fixed methods use 16.
-    width, height : int, optional
-        Image size in pixels (defaults of :class:`~povlens.plan.options.ConvertOptions`).
-    jobs : int, optional
-        POV-Ray processes in parallel (default: the number of cores).
     progress : bool
         Show a progress bar on stderr.
+    on_plan : callable, optional
+        Called with the plan between the conversion and the rendering.
+    renderer : optional
+        Where to render (:func:`renderer_for`); default: made from ``jobs``,
+        ``scheduler``, ``shared_dir``, ``group_size`` and ``scheduler_timeout_s``:
+    jobs : int, optional
+        POV-Ray processes in parallel here (default: the number of cores).
     scheduler : str, optional
         Address of a Dask scheduler (``tcp://host:8786``; default: the environment's
         ``POVLENS_SCHEDULER``, else render here): the lens samples render on its
@@ -190,6 +252,8 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         With ``scheduler``: lens samples per task, summed on the worker (default
         :func:`povlens.rendering.groups.choose_group_size`; 1: the image is the local
         one bit for bit).
+    scheduler_timeout_s : float
+        Seconds to wait for the scheduler to answer.
 
     Returns
     -------
@@ -197,16 +261,10 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
         The plan and the paths of ``image.exr`` (linear light) and ``image.png``.
         An interrupted render resumes when called again with the same arguments.
     """
-    from povlens.rendering.driver import convert_and_render
-    scheduler = _scheduler_of(scheduler, shared_dir, group_size)
-    overrides = _render_overrides(method, samples, width, height, options)
-    opts = _options(scene, lens, focus, outdir, overrides)
-    if scheduler is not None:
-        from povlens.cluster.client import convert_and_render_on_cluster
-        plan, exr = convert_and_render_on_cluster(opts, scheduler, shared_dir=shared_dir,
-                                                  quiet=not progress, group_size=group_size)
-    else:
-        plan, exr = convert_and_render(opts, jobs=jobs, quiet=not progress)
+    opts = _options(scene, lens, outdir, focus, options)
+    if renderer is None:
+        renderer = renderer_for(scheduler, shared_dir, group_size, scheduler_timeout_s, jobs)
+    plan, exr = renderer.render(opts, quiet=not progress, on_plan=on_plan)
     exr = Path(exr)
     return RenderResult(plan, exr, exr.with_suffix(".png"))
 
@@ -221,23 +279,37 @@ class FramesResult:
     images_png: list[Path]
 
 
+def _pull(focus, frames) -> list[float]:
+    if not isinstance(focus, (tuple, list, str)):
+        raise ParameterError("focus", focus, f"focus={focus!r}: a focus pull is (A, B) or a "
+                             f"list of distances", "for one focus use povlens.render")
+    values = focus_distances(focus, frames)
+    if values is None:
+        raise ParameterError("focus", focus, f"focus={focus}: a focus pull is A:B with "
+                             f"frames=N, or a list of distances",
+                             "for one focus use povlens.render")
+    return values
+
+
 def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
                   outdir: str | os.PathLike, focus, frames: int | None = None,
-                  method: str = "auto", samples: int | None = None, width: int | None = None,
-                  height: int | None = None, jobs: int | None = None, progress: bool = False,
-                  scheduler=None, shared_dir: bool = False, group_size: int | None = None,
+                  progress: bool = False, on_plan: Callable[[Plan], None] | None = None,
+                  renderer=None, jobs: int | None = None, scheduler=None,
+                  shared_dir: bool = False, group_size: int | None = None,
+                  scheduler_timeout_s: float = DaskOptions.scheduler_timeout_s,
                   **options) -> FramesResult:
     """Render a focus pull: one frame per focus distance (:mod:`povlens.rendering.focus_pull`).
 
     Parameters are those of :func:`render`, except:
 
-    focus : (A, B) tuple or list of float
+    focus : (A, B) tuple, list of float, or text
         ``(A, B)``: a pull from A to B in ``frames`` frames, even steps in dioptres
-        (1/distance); a list: one frame per distance.  Scene units, positive, finite.
+        (1/distance); a list: one frame per distance; text as ``--focus`` takes it
+        (``"2:6"``, ``"1,2,4"``).  Scene units, positive, finite.
     frames : int, optional
         Frames of a pull (at least 2); with a list, its length if given.
-    scheduler, shared_dir, group_size : as :func:`render`: every frame's lens samples
-        on that Dask cluster, one client for all frames.
+    on_plan : called with each frame's plan.  The renderer (or ``scheduler``, ...)
+        renders every frame: one Dask client for all frames.
 
     Returns
     -------
@@ -252,25 +324,30 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
         ``frames`` < 1 or not matching the list, a pull without ``frames`` >= 2, a
         single distance, distances not positive and finite (``focus``).
     """
-    from povlens.errors import ParameterError
-    from povlens.plan.focus_series import focus_series
-    from povlens.rendering.focus_pull import render_frames as render_pull
-    if not isinstance(focus, (tuple, list)):
-        raise ParameterError("focus", focus, f"focus={focus!r}: a focus pull is (A, B) or a "
-                             f"list of distances", "for one focus use povlens.render")
-    values = focus_series(list(focus) if isinstance(focus, list) else tuple(focus), frames)
-    overrides = _render_overrides(method, samples, width, height, options)
-    opts = _options(scene, lens, values[0], outdir, overrides)
-    scheduler = _scheduler_of(scheduler, shared_dir, group_size)
-    if scheduler is not None:
-        from povlens.cluster.client import render_frames_on_cluster
-        records = render_frames_on_cluster(opts, values, scheduler, shared_dir=shared_dir,
-                                           quiet=not progress, group_size=group_size)
-    else:
-        records = render_pull(opts, values, jobs=jobs, quiet=not progress)
+    values = _pull(focus, frames)
+    opts = _options(scene, lens, outdir, values[0], options)
+    if renderer is None:
+        renderer = renderer_for(scheduler, shared_dir, group_size, scheduler_timeout_s, jobs)
+    records = renderer.render_frames(opts, values, quiet=not progress, on_plan=on_plan)
     out = Path(outdir)
     return FramesResult(records, [out / r.image_exr for r in records],
                         [out / r.image_png for r in records])
+
+
+def render_batch(outdir: str | os.PathLike, batch: int, in_flight: int = 4) -> None:
+    """Render batch ``batch`` of a converted folder's lens samples (what ``make`` runs).
+
+    ``in_flight``: POV-Ray processes running at once (each spends most of its ~0.6 s
+    start-up idle, so several overlap on one core)."""
+    from povlens.rendering.mesh_samples import render_batch as render_folder_batch
+    render_folder_batch(outdir, batch, in_flight=in_flight)
+
+
+def render_view(outdir: str | os.PathLike, view: str) -> Path:
+    """Render the ``"pinhole"`` or ``"focal-blur"`` view of a converted folder (what
+    ``make`` runs); returns its image's path."""
+    from povlens.rendering.views import render_view as render_folder_view
+    return render_folder_view(outdir, view)
 
 
 def composite(outdir: str | os.PathLike, vignetting: bool | None = None) -> np.ndarray:

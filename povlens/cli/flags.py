@@ -11,55 +11,33 @@ import re
 from collections.abc import Collection
 
 from povlens.errors import ParameterError, PovlensError
+from povlens.plan.options import dask_options, options
 
-__all__ = ["FLAG_OF", "with_flags", "error_text"]
+__all__ = ["FLAG_OF", "OTHER_FLAGS", "with_flags", "error_text"]
 
-#: API parameter (function argument or :class:`~povlens.plan.convert.ConvertOptions`
-#: field) -> the option that sets it.
-FLAG_OF = {
-    "f_number": "--f-number",
-    "stop_diameter_mm": "--stop-diameter",
-    "focus": "--focus",
-    "focus_at": "--focus-at",
+#: Parameters of the core that are no option of a conversion (the lens commands', the
+#: importers', a pull's) or that name an option otherwise (``width_px`` of
+#: :class:`~povlens.lens.film.Film` is ``--width``) -> the option that sets them.
+OTHER_FLAGS = {
     "frames": "--frames",
     "distance_mm": "--distance",
-    "units": "--units",
-    "method": "--method",
-    "samples": "--samples",
-    "batch_size": "--batch-size",
     "tolerance": "--tolerance",
-    "tolerance_px": "--tolerance",
-    "location": "--location",
-    "look_at": "--look-at",
-    "sky": "--sky",
     "plane": "--plane",
     "view": "--view",
-    "width": "--width",
-    "ray_mesh": "--ray-mesh",
     "width_px": "--width",
-    "height": "--height",
     "height_px": "--height",
     "diagonal_mm": "--film-diagonal",
-    "film_diagonal_mm": "--film-diagonal",
-    "film_size_mm": "--film-size",
-    "shift_mm": "--shift-mm",
-    "scheduler": "--scheduler",
-    "shared_dir": "--shared-dir",
-    "group_size": "--group-size",
-    "aperture_blades": "--aperture-blades",
-    "blade_curvature": "--blade-curvature",
-    "blade_rotation_deg": "--blade-rotation",
-    "aperture_image": "--aperture-image",
-    "dispersion": "--dispersion",
     "film_distance_mm": "--film-distance",
-    "library_paths": "--library-path",
-    "clock": "--clock",
-    "povray_options": "--povray-option",
     "lens_id": "--id",
     "efl_mm": "--efl",
     "adjusted": "--adjusted",
     "glasses": "--glass",
 }
+
+#: API parameter -> the option that sets it: every declared option with a flag
+#: (:mod:`povlens.plan.options`), and :data:`OTHER_FLAGS`.
+FLAG_OF = ({f.name: spec.flag for _, f, spec in options() if spec.flag is not None}
+           | {f.name: spec.flag for f, spec in dask_options()} | OTHER_FLAGS)
 
 _NAMES = "|".join(sorted(map(re.escape, FLAG_OF), key=len, reverse=True))
 # 'name' alone, or name=value (not name==, not part of a longer identifier).

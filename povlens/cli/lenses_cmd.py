@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from povlens.lens.bundled import DEFAULT_FILM_DIAGONAL_MM, bundled_lenses
+from povlens.lens.bundled import bundled_lenses
+from povlens.lens.film import DEFAULT_FILM_DIAGONAL_MM
 from povlens.cli.common import positive_float, print_json
 
 
@@ -14,7 +15,7 @@ def register(sub) -> None:
                     "(real chief ray from the film corner, focused at infinity), and where "
                     "each lens comes from (SOURCES.md next to the lens files).")
     p.add_argument("--film-diagonal", type=positive_float, default=DEFAULT_FILM_DIAGONAL_MM,
-                   metavar="MM", help="film diagonal for the field of view (default 35 mm)")
+                   metavar="MM", help="film diagonal for the field of view (default %(default)g mm)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=run)
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 import tempfile
 
+from povlens import api
 from povlens.cli.common import print_json
-from povlens.cli.render_cmd import add_convert_arguments, options_from_args, print_notes
-from povlens.plan.convert import convert
+from povlens.cli.render_cmd import add_convert_arguments, convert_keywords, print_notes
 
 
 def register(sub) -> None:
@@ -33,14 +33,12 @@ def _fmt(v) -> str:
 
 
 def run(args) -> int:
-    args.method = "auto"
+    kw = convert_keywords(args) | {"method": "auto"}
     if args.outdir:
-        plan = convert(options_from_args(args))
+        plan = api.convert(args.scene, lens=args.lens, outdir=args.outdir, **kw)
     else:
         with tempfile.TemporaryDirectory(prefix="povlens-plan.") as tmp:
-            args.outdir = tmp
-            plan = convert(options_from_args(args))
-            args.outdir = None
+            plan = api.convert(args.scene, lens=args.lens, outdir=tmp, **kw)
     d = plan.decision
     inp = plan.inputs
     print_notes(plan)

@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from povlens.errors import UsageError
-from povlens.lens.film import parse_film_size
+from povlens.lens.film import DEFAULT_FILM_DIAGONAL_MM, parse_film_size
 from povlens.lens.focus import UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_mm
 from povlens.lens.paraxial import ParaxialData, paraxial_data
 from povlens.lens.prescription import LensPrescription
@@ -48,7 +48,7 @@ def register(sub) -> None:
                         "equation (pbrt's method, the default)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--film-diagonal", type=positive_float, metavar="MM",
-                   help="film diagonal in mm (default 35)")
+                   help=f"film diagonal in mm (default {DEFAULT_FILM_DIAGONAL_MM:g})")
     g.add_argument("--film-size", metavar="W,H", help="film width and height in mm, e.g. 36,24")
     p.add_argument("--tolerance", type=positive_float, default=DEFAULT_TOLERANCE, metavar="T",
                    help=f"relative area error of the table's region description "
@@ -100,7 +100,7 @@ def _film(args) -> dict:
     if args.film_size is not None:
         w, h = parse_film_size(args.film_size)
         return {"width_mm": w, "height_mm": h, "diagonal_mm": math.hypot(w, h)}
-    d = args.film_diagonal if args.film_diagonal is not None else 35.0
+    d = args.film_diagonal if args.film_diagonal is not None else DEFAULT_FILM_DIAGONAL_MM
     return {"diagonal_mm": d}
 
 

@@ -25,15 +25,15 @@ from pathlib import Path
 import numpy as np
 
 from povlens.lens.chief_ray import chief_rays
+from povlens.lens.film import DEFAULT_FILM_DIAGONAL_MM
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import LensPrescription, read_lens
 from povlens.util.resources import LENS_DIR
 
 __all__ = ["BundledLens", "bundled_lens_folder", "lens_sources", "bundled_lenses",
-           "diagonal_field_of_view_deg", "DEFAULT_FILM_DIAGONAL_MM"]
+           "diagonal_field_of_view_deg"]
 
 #: The film the field of view is given for: 35 mm diagonal (povlens's default film).
-DEFAULT_FILM_DIAGONAL_MM = 35.0
 
 # A summary row of SOURCES.md: | `file.dat` | format | lens | origin |
 _SUMMARY_ROW = re.compile(r"^\|\s*`(?P<file>[^`]+\.dat)`\s*\|(?P<format>[^|]*)\|"

@@ -46,6 +46,7 @@ import numpy as np
 from povlens.lens import reference_tracer
 from povlens.lens import tracer
 from povlens.errors import UsageError
+from povlens.lens.film import DEFAULT_FILM_DIAGONAL_MM
 from povlens.lens.prescription import LensPrescription
 
 __all__ = ["CheckReport", "Disagreement", "check_lens", "check_rays", "POSITION_TOL_MM",
@@ -57,7 +58,6 @@ DIRECTION_TOL = 1e-12
 EDGE_RTOL = 1e-6
 DEFAULT_N_FILM = 40
 DEFAULT_N_PUPIL = 256
-DEFAULT_FILM_DIAGONAL_MM = 35.0
 DEFAULT_PUPIL_OVERFILL = 1.2
 #: At most this many disagreements are listed individually in a report.
 MAX_LISTED = 20

@@ -25,7 +25,11 @@ import numpy as np
 
 from povlens.errors import ParameterError
 
-__all__ = ["Film", "parse_film_size", "parse_shift"]
+__all__ = ["Film", "parse_film_size", "parse_shift", "DEFAULT_FILM_DIAGONAL_MM"]
+
+#: The film's diagonal when none is given: 35 mm (a 28 x 21 mm film at 4:3; pbrt's
+#: default ``diagonal``), mm.
+DEFAULT_FILM_DIAGONAL_MM = 35.0
 
 
 @dataclasses.dataclass(frozen=True)

@@ -41,7 +41,7 @@ from povlens.lens.paraxial import paraxial_data, stopped_down
 from povlens.lens.prescription import LensPrescription, read_lens
 from povlens.plan.aperture import apply_aperture_shape, inputs_of_shape, shape_of_options
 from povlens.plan.dispersion_plan import apply_dispersion
-from povlens.plan.options import METHODS, ConvertOptions, povray_options_of
+from povlens.plan.options import METHODS, ConvertOptions, povray_options_of, stored_values
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import (CameraPlacement, FocusSolution, Inputs, LensSummary, Plan,
                                  PovrayCamera, PovraySettings)
@@ -412,15 +412,12 @@ def _standard_depths_mm(model: EquivalentThinLens, object_d: float, efl_mm: floa
 
 
 def _inputs(opts: ConvertOptions, st: PlanStart) -> Inputs:
+    """The plan's ``inputs``: the options kept as given (:func:`stored_values`) and the
+    others as the conversion resolved them."""
     return Inputs(
+        **stored_values(opts),
         scene=str(Path(opts.scene).resolve()), lens=st.lens.source,
-        lens_sha256=st.lens.sha256(), focus=st.focus, units=opts.units,
-        f_number=opts.f_number, stop_diameter_mm=opts.stop_diameter_mm,
-        film_diagonal_mm=opts.film_diagonal_mm,
-        film_size_mm=None if opts.film_size_mm is None else tuple(opts.film_size_mm),
-        width=opts.width, height=opts.height, method=opts.method, samples=opts.samples,
-        batch_size=opts.batch_size, seed=opts.seed, real_focus=opts.real_focus,
-        vignetting=opts.vignetting, jitter=opts.jitter, adaptive=bool(opts.adaptive),
+        lens_sha256=st.lens.sha256(), focus=st.focus, samples=opts.samples,
         camera_from=st.camera_from, focus_from=st.focus_from,
         focus_at=None if opts.focus_at is None else tuple(int(v) for v in opts.focus_at),
         library_paths=st.povray.library_paths, clock=st.povray.clock,
