@@ -88,7 +88,7 @@ def _fresh_copy(base: Path, dest: Path, samples: int | None = None) -> Path:
 
 def _convert(tmp: Path, scene: Path, lens: str, size: tuple[int, int], samples: int) -> Path:
     out = tmp / f"base_{size[0]}x{size[1]}_{samples}"
-    convert(ConvertOptions(scene=str(scene), lens=lens, focus=4.0, outdir=str(out),
+    convert(ConvertOptions.of(scene=str(scene), lens=lens, focus=4.0, outdir=str(out),
                            width=size[0], height=size[1], method="mesh", samples=samples))
     return out
 

@@ -57,7 +57,7 @@ def _pull(outdir: str, width: int, height: int, frames: int, render: bool) -> li
         from povlens.plan.options import ConvertOptions
         from povlens.rendering.focus_pull import convert_frames
         values = focus_series((0.8, 5.5), frames)
-        return convert_frames(ConvertOptions(scene=SCENE, lens="dgauss.50mm", focus=values[0],
+        return convert_frames(ConvertOptions.of(scene=SCENE, lens="dgauss.50mm", focus=values[0],
                                              outdir=outdir, method="auto", width=width,
                                              height=height), values)
     r = povlens.render_frames(SCENE, lens="dgauss.50mm", outdir=outdir, focus=(0.8, 5.5),

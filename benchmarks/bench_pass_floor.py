@@ -56,12 +56,12 @@ def floor_of(scene: Path, lens: str, width: int, height: int, mesh_n: int, work:
     fb = {}
     for n in (1, 16, 64):
         d = work / f"fb-{scene.stem}-{width}-{n}"
-        convert(ConvertOptions(outdir=str(d), method="focal-blur", samples=n, **base))
+        convert(ConvertOptions.of(outdir=str(d), method="focal-blur", samples=n, **base))
         if n == 1:
             fb["pinhole"], _ = cpu_of(render_view, d, "pinhole")
         fb[n], _ = cpu_of(render_view, d, "focal-blur")
     d = work / f"mesh-{scene.stem}-{width}"
-    convert(ConvertOptions(outdir=str(d), method="mesh", samples=mesh_n, **base))
+    convert(ConvertOptions.of(outdir=str(d), method="mesh", samples=mesh_n, **base))
     pov_cpu, py_cpu = cpu_of(render_outdir, d, quiet=True)
     passes = max(1, len(list((d / "samples").glob("sample_*.exr"))))
     row = {"scene": scene.name, "size": f"{width}x{height}", "pinhole": fb["pinhole"],

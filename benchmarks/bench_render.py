@@ -157,7 +157,7 @@ def mesh_row(work: Path, base: dict, n: int, jobs: int, ray_mesh: str = "field",
              seed: int = 0) -> dict:
     d = work / f"mesh-{ray_mesh}-{n}-{seed}"
     with PeakMemory() as mem:
-        t_conv, _ = timed(convert, ConvertOptions(outdir=str(d), method="mesh", samples=n,
+        t_conv, _ = timed(convert, ConvertOptions.of(outdir=str(d), method="mesh", samples=n,
                                                   ray_mesh=ray_mesh, seed=seed, **base))
         t_render, _ = timed(render_outdir, d, jobs=jobs, quiet=True)
     plan = read_plan(d)
@@ -180,14 +180,14 @@ def bench_size(scene: Path, lens: str, width: int, height: int, ns: list[int], j
     base = dict(scene=str(scene), lens=lens, focus=4.0, width=width, height=height)
     rows = []
     views = work / f"views-{scene.stem}-{width}"
-    t_conv_fb, _ = timed(convert, ConvertOptions(outdir=str(views), method="focal-blur",
+    t_conv_fb, _ = timed(convert, ConvertOptions.of(outdir=str(views), method="focal-blur",
                                                  samples=ns[0], **base))
     t_pin, _ = timed(render_view, views, "pinhole")
     print(f"\n{scene.name}, {lens}, {width}x{height}, {jobs} cores")
     print(f"  pinhole                 {t_pin:8.2f} s")
     for n in ns:
         d = work / f"fb-{scene.stem}-{width}-{n}"
-        t_c, _ = timed(convert, ConvertOptions(outdir=str(d), method="focal-blur", samples=n,
+        t_c, _ = timed(convert, ConvertOptions.of(outdir=str(d), method="focal-blur", samples=n,
                                                **base))
         with PeakMemory() as mem:
             t_fb, _ = timed(render_view, d, "focal-blur")

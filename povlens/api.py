@@ -20,12 +20,13 @@ from povlens.lens.prescription import LensPrescription, read_lens as read_lens_f
 from povlens.errors import ParameterError
 from povlens.plan.convert import convert as convert_options
 from povlens.plan.focus_series import FocusPull, focus_series, parse_focus
-from povlens.plan.options import ConvertOptions, DaskOptions
+from povlens.plan.options import SCHEDULER_ENV_VAR, ConvertOptions, DaskOptions
+from povlens.plan.render_folder import FramesFolder, RenderFolder
 from povlens.plan.schema import Plan
 
 __all__ = ["read_lens", "focus", "convert", "render", "composite", "compare", "RenderResult",
            "import_lens", "render_frames", "FramesResult", "convert_frames", "focus_distances",
-           "renderer_for", "render_batch", "render_view"]
+           "renderer_for", "render_batch", "render_view", "RenderFolder"]
 
 
 def read_lens(name_or_path: str | os.PathLike) -> LensPrescription:
@@ -158,20 +159,21 @@ def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | 
 
 def convert_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
                    outdir: str | os.PathLike, focus, frames: int | None = None,
-                   **options) -> list:
+                   **options) -> "FramesResult":
     """Write the render folders of a focus pull, one per frame (no rendering).
 
     Parameters are those of :func:`render_frames` without the rendering ones.
 
     Returns
     -------
-    list
-        One record per frame (focus, film distance, field of view, method, folder);
-        ``outdir/frames.json`` indexes them and ``outdir/Makefile`` renders them.
+    FramesResult
+        One record per frame (focus, film distance, field of view, method, folder),
+        the images ``make -C outdir`` will write, and the index (``frames.json``).
     """
     from povlens.rendering.focus_pull import convert_frames as convert_pull
     values = _pull(focus, frames)
-    return convert_pull(_options(scene, lens, outdir, values[0], options), values)
+    records = convert_pull(_options(scene, lens, outdir, values[0], options), values)
+    return FramesResult.of(outdir, records)
 
 
 def renderer_for(scheduler: str | None = None, shared_dir: bool = False,
@@ -197,7 +199,7 @@ def renderer_for(scheduler: str | None = None, shared_dir: bool = False,
         ``render(opts, quiet, on_plan)`` and ``render_frames(opts, values, quiet,
         on_plan)``.
     """
-    dask = DaskOptions(scheduler=scheduler or os.environ.get("POVLENS_SCHEDULER") or None,
+    dask = DaskOptions(scheduler=scheduler or os.environ.get(SCHEDULER_ENV_VAR) or None,
                        shared_dir=shared_dir, group_size=group_size,
                        scheduler_timeout_s=scheduler_timeout_s)
     if dask.scheduler is not None:
@@ -207,7 +209,7 @@ def renderer_for(scheduler: str | None = None, shared_dir: bool = False,
         name, given = ("shared_dir", "True") if shared_dir else ("group_size", group_size)
         raise ParameterError(name, given, f"{name}={given} needs 'scheduler'",
                              f"give the scheduler's address, or leave out '{name}'")
-    from povlens.rendering.driver import LocalRenderer    # loads OpenImageIO: when needed
+    from povlens.rendering.local_renderer import LocalRenderer    # loads OpenImageIO
     return LocalRenderer(jobs)
 
 
@@ -272,11 +274,19 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
 @dataclasses.dataclass(frozen=True)
 class FramesResult:
     """What :func:`render_frames` made: one record per frame (focus, film distance,
-    field of view, method, folder) and the numbered images (linear EXR, sRGB PNG)."""
+    field of view, method, folder), the numbered images (linear EXR, sRGB PNG) and
+    the pull's index, ``frames.json``."""
 
     frames: list
     images_exr: list[Path]
     images_png: list[Path]
+    index: Path
+
+    @classmethod
+    def of(cls, outdir, records: list) -> "FramesResult":
+        out = Path(outdir)
+        return cls(records, [out / r.image_exr for r in records],
+                   [out / r.image_png for r in records], FramesFolder(out).frames_json)
 
 
 def _pull(focus, frames) -> list[float]:
@@ -329,9 +339,7 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
     if renderer is None:
         renderer = renderer_for(scheduler, shared_dir, group_size, scheduler_timeout_s, jobs)
     records = renderer.render_frames(opts, values, quiet=not progress, on_plan=on_plan)
-    out = Path(outdir)
-    return FramesResult(records, [out / r.image_exr for r in records],
-                        [out / r.image_png for r in records])
+    return FramesResult.of(outdir, records)
 
 
 def render_batch(outdir: str | os.PathLike, batch: int, in_flight: int = 4) -> None:

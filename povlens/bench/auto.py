@@ -155,7 +155,7 @@ def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]
                     base = dict(scene=str(scene_path), lens=lens, focus=focus,
                                 width=s.width, height=s.height, outdir=str(tmp / tag / name))
                     base.update(kw)
-                    return ConvertOptions(**base)
+                    return ConvertOptions.of(**base)
 
                 half = max(1, s.reference_samples // 2)
                 t1, ref1, _ = _render(opts("reference1", method="mesh", samples=half,

@@ -366,7 +366,7 @@ def run_bench(s: BenchSettings, quiet: bool = False) -> tuple[list[Row], str]:
     def conv(name: str, lens: str, n: int, method: str, seed: int,
              ray_mesh: str = "pixel") -> Path:
         d = work / name
-        convert(ConvertOptions(scene=s.scene, lens=lens, focus=s.focus, outdir=str(d),
+        convert(ConvertOptions.of(scene=s.scene, lens=lens, focus=s.focus, outdir=str(d),
                                width=s.width, height=s.height, method=method, samples=n,
                                batch_size=math.ceil(n / jobs), seed=seed, ray_mesh=ray_mesh))
         return d

@@ -45,15 +45,15 @@ def _keywords(args, frames: list[float]) -> dict:
 
 
 def run_convert_frames(args, frames: list[float]) -> int:
-    records = api.convert_frames(args.scene, lens=args.lens, outdir=args.outdir,
-                                 **_keywords(args, frames))
+    result = api.convert_frames(args.scene, lens=args.lens, outdir=args.outdir,
+                                **_keywords(args, frames))
     if args.json:
         import dataclasses
-        print_json({"frames": [dataclasses.asdict(r) for r in records]})
+        print_json({"frames": [dataclasses.asdict(r) for r in result.frames]})
         return 0
-    print(_table(records, args.units))
-    print(f"wrote {args.outdir}/frames.json, {len(records)} frame folders and "
-          f"{args.outdir}/Makefile; render with 'make -C {args.outdir} -j{os.cpu_count() or 1}'")
+    print(_table(result.frames, args.units))
+    print(f"wrote {result.index}, {len(result.frames)} frame folders and a Makefile; "
+          f"render with 'make -C {args.outdir} -j{os.cpu_count() or 1}'")
     return 0
 
 
@@ -63,6 +63,6 @@ def run_render_frames(args, frames: list[float], renderer) -> int:
                                on_plan=_printer(args.quiet), **_keywords(args, frames))
     if not args.quiet:
         print(_table(result.frames, args.units))
-        print(f"wrote {args.outdir}/image.0001.exr ... image.{len(result.frames):04d}.exr "
-              f"(and .png), {args.outdir}/frames.json")
+        print(f"wrote {result.images_exr[0]} ... {result.images_exr[-1].name} (and .png), "
+              f"{result.index}")
     return 0

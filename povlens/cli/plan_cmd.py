@@ -58,6 +58,5 @@ def run(args) -> int:
             continue
         print(f"  {k:28s} {_fmt(v)}")
     if args.outdir:
-        from povlens.plan.render_folder import RenderFolder
-        print(f"wrote {RenderFolder(args.outdir).plan_json}; render with 'make -C {args.outdir}'")
+        print(f"wrote {api.RenderFolder(args.outdir).plan_json}; render with 'make -C {args.outdir}'")
     return 0

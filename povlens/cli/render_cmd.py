@@ -94,8 +94,7 @@ def run_convert(args) -> int:
         print_json(plan.to_dict())
     else:
         print(_summary(plan))
-        from povlens.plan.render_folder import RenderFolder
-        folder = RenderFolder(args.outdir)
+        folder = api.RenderFolder(args.outdir)
         print(f"wrote {folder.plan_json} and {folder.makefile}; "
               f"render with 'make -C {args.outdir} -j{os.cpu_count() or 1}'")
     return 0

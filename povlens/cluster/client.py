@@ -30,6 +30,7 @@ from povlens.cluster.bundle import make_bundle
 from povlens.cluster.worker import forget_render, render_group, render_sample
 from povlens.errors import ParameterError, PovlensError, PovrayError
 from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.options import SCHEDULER_ENV_VAR, DaskOptions
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import read_plan
 from povlens.rendering.driver import render_outdir
@@ -40,14 +41,14 @@ from povlens.rendering.groups import (UnitSums, choose_group_size, chunk_groups,
 from povlens.rendering.mesh_samples import mark_batches_done
 from povlens.util.files import write_bytes, write_text
 
-__all__ = ["ENV_VAR", "CONNECT_TIMEOUT_S", "WORKER_WAIT_S", "scheduler_address", "connect",
+__all__ = ["DaskRenderer", "ENV_VAR", "CONNECT_TIMEOUT_S", "WORKER_WAIT_S", "scheduler_address", "connect",
            "render_outdir_on_cluster", "convert_and_render_on_cluster",
            "render_frames_on_cluster", "task_samples"]
 
 #: Environment variable naming the scheduler when ``--scheduler`` is not given.
-ENV_VAR = "POVLENS_SCHEDULER"
+ENV_VAR = SCHEDULER_ENV_VAR
 #: Seconds to wait for the scheduler to answer.
-CONNECT_TIMEOUT_S = 10.0
+CONNECT_TIMEOUT_S = DaskOptions.scheduler_timeout_s   # --scheduler-timeout's default
 #: Seconds to wait for a first worker to join (a batch queue may take a while).
 WORKER_WAIT_S = 600.0
 #: Times a task is run again after an exception other than a PovlensError (a worker's
@@ -383,3 +384,28 @@ def render_frames_on_cluster(opts: ConvertOptions, focus_values: list[float], sc
     finally:
         if owned:
             client.close()
+
+
+class DaskRenderer:
+    """Renders the lens samples on the Dask cluster of ``options.scheduler``; what
+    :func:`povlens.api.renderer_for` gives when a scheduler is named (its counterpart
+    is :class:`povlens.rendering.local_renderer.LocalRenderer`)."""
+
+    def __init__(self, options: DaskOptions):
+        self.options = options
+
+    def _keywords(self) -> dict:
+        o = self.options
+        return {"shared_dir": o.shared_dir, "connect_timeout_s": o.scheduler_timeout_s,
+                "group_size": o.group_size}
+
+    def render(self, opts: ConvertOptions, quiet: bool = False, on_plan=None):
+        """Convert ``opts`` here, render its samples on the cluster: (plan, image.exr)."""
+        return convert_and_render_on_cluster(opts, self.options.scheduler, quiet=quiet,
+                                             on_plan=on_plan, **self._keywords())
+
+    def render_frames(self, opts: ConvertOptions, focus_values: list[float],
+                      quiet: bool = False, on_plan=None) -> list:
+        """Every frame of a focus pull, one client for all: the frames' records."""
+        return render_frames_on_cluster(opts, focus_values, self.options.scheduler,
+                                        quiet=quiet, on_plan=on_plan, **self._keywords())

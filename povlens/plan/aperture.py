@@ -70,19 +70,18 @@ def _shape(blades, curvature, rotation_deg, image) -> ApertureShape | None:
                          mask=mask, mask_source=str(image) if image is not None else "")
 
 
-def shape_of_options(opts) -> ApertureShape | None:
-    """The shape asked for by :class:`~povlens.plan.options.ConvertOptions` (None: round).
-    ``blade_curvature`` / ``blade_rotation_deg`` without blades are refused (they would
-    do nothing)."""
-    blades = getattr(opts, "aperture_blades", None)
-    if blades is None:
+def shape_of_options(aperture) -> ApertureShape | None:
+    """The shape asked for by :class:`~povlens.plan.options.ApertureOptions` (None:
+    round).  ``blade_curvature`` / ``blade_rotation_deg`` without blades are refused
+    (they would do nothing)."""
+    if aperture.aperture_blades is None:
         for name in ("blade_curvature", "blade_rotation_deg"):
-            v = getattr(opts, name, 0.0)
+            v = getattr(aperture, name)
             if v not in (None, 0.0):
                 raise ParameterError(name, v, f"{name}={v}: needs an iris",
                                      "give aperture_blades=N too")
-    return _shape(blades, getattr(opts, "blade_curvature", 0.0),
-                  getattr(opts, "blade_rotation_deg", 0.0), getattr(opts, "aperture_image", None))
+    return _shape(aperture.aperture_blades, aperture.blade_curvature,
+                  aperture.blade_rotation_deg, aperture.aperture_image)
 
 
 def inputs_of_shape(shape: ApertureShape | None) -> dict:
@@ -136,7 +135,7 @@ def apply_aperture_shape(opts, plan, lens, table) -> None:
     shape = lens.aperture_shape
     if shape is None:
         return
-    if opts.method == "focal-blur":
+    if opts.sampling.method == "focal-blur":
         plan.add_note(FOCAL_BLUR_NOTE.format(what=describe(shape)))
     fm = plan.field_mesh
     if (shape.blades is None or shape.mask is not None or table is None

@@ -64,10 +64,10 @@ def start_depth_probe(opts, film: Film, plan, threads: int = 1) -> DepthProbe:
     ``plan`` is a :class:`~povlens.plan.schema.Plan` of ``opts`` (any method) or
     the :class:`~povlens.plan.fixed.PlanStart` of one: its ``povray_camera`` is
     the probe's, since the probe's film is the same in mm; only the pixels
-    differ.  Every render gets the user's POV-Ray options (``opts.library_paths``,
+    differ.  Every render gets the user's POV-Ray options (``opts.povray.library_paths``,
     ``clock``, ``povray_options``).  Besides the three depth renders, the view as it
     is is rendered (``image`` of the probe: the vignetting's effect on the image) when the lens's
-    vignetting is wanted (``opts.vignetting``); with ``--no-vignetting`` nothing
+    vignetting is wanted (``opts.sampling.vignetting``); with ``--no-vignetting`` nothing
     reads it, and the probe is one POV-Ray process fewer.  The renders run in a
     temporary folder ``.probe.*`` in OUTDIR (``threads`` POV-Ray threads each).
 
@@ -80,10 +80,10 @@ def start_depth_probe(opts, film: Film, plan, threads: int = 1) -> DepthProbe:
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
     view = ProbeView(plan.povray_camera, film.resized(film.width_mm, film.height_mm, pw, ph),
-                     plan.mm_per_unit, str(Path(opts.scene).resolve()), float(opts.focus),
-                     povray_options_of(opts))
+                     plan.mm_per_unit, str(Path(opts.scene).resolve()), float(opts.pose.focus),
+                     povray_options_of(opts.povray))
     return start_probe(view, out, threads=threads, keep_wrappers=False, prefix=".probe.",
-                       label=str(opts.scene), with_image=bool(getattr(opts, "vignetting", True)))
+                       label=str(opts.scene), with_image=opts.sampling.vignetting)
 
 
 def probe_axial_mm(probe: DepthProbe) -> np.ndarray:
@@ -133,7 +133,7 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     Returns
     -------
     (Decision, AdaptiveSampling or None)
-        The decision, and with ``opts.adaptive`` the row bands from the same probe.
+        The decision, and with ``opts.sampling.adaptive`` the row bands from the same probe.
     """
     if probe is None:
         probe = start_depth_probe(opts, film, plan)
@@ -162,12 +162,12 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     profile = profile_of()
     image_error = None
     if probe.image is not None:
-        image_error = probe_image_error(probe.image, film, err, opts.tolerance_px,
+        image_error = probe_image_error(probe.image, film, err, opts.auto.tolerance_px,
                                         profile=profile, table=table, model=model,
                                         axial_mm=axial)
     d = decide(near_z_mm=near_z, far_z_mm=far_z, model=model, model_error=err,
-               pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.tolerance_px,
-               vignetting=opts.vignetting, image_error=image_error,
+               pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.auto.tolerance_px,
+               vignetting=opts.sampling.vignetting, image_error=image_error,
                catseye=pupil_cut(profile),
                aperture_shape=(describe(lens.aperture_shape) if lens.aperture_shape is not None
                                else None),
@@ -176,13 +176,13 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
         d.add_remark((AUTO_NOTE if d.method == "mesh" else PINHOLE_NOTE).format(
             what=describe(lens.aperture_shape)))
     d.numbers["depth_probe"] = info
-    if opts.vignetting:     # the render of a view applies this profile (rendering/vignetting)
+    if opts.sampling.vignetting:     # the render of a view applies this profile (rendering/vignetting)
         d.numbers["illumination_profile"] = profile_record(profile, table)
     if info["no_depth_pixels"]:
         d.add_remark(f"{info['no_depth_pixels']} of the probe's {info['probe_pixels']} pixels "
                      f"hit surfaces without a measurable response to light (black, emissive, "
                      f"clear): left out of the depth range")
     adaptive = None
-    if getattr(opts, "adaptive", False):
+    if opts.sampling.adaptive:
         adaptive = adaptive_rows(model, axial, film, d.samples, model_error=err)
     return d, adaptive

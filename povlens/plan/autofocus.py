@@ -73,20 +73,20 @@ def focus_point(opts: ConvertOptions) -> tuple[float, float, str]:
     """Where to focus: (x, y) in output pixels (pixel (i, j) covers [i, i+1) x [j, j+1),
     row 0 at the top) and the plan.json ``focus_from`` label.
 
-    ``opts.focus_at`` (X, Y) is the centre of pixel (X, Y); without it, the frame's
+    ``opts.pose.focus_at`` (X, Y) is the centre of pixel (X, Y); without it, the frame's
     centre.  :class:`ParameterError` for a pixel outside the image.
     """
-    w, h = int(opts.width), int(opts.height)
-    if opts.focus_at is None:
+    w, h = int(opts.film.width), int(opts.film.height)
+    if opts.pose.focus_at is None:
         return w / 2.0, h / 2.0, "depth probe at centre"
     try:
-        x, y = (int(v) for v in opts.focus_at)
+        x, y = (int(v) for v in opts.pose.focus_at)
     except (TypeError, ValueError):
-        raise ParameterError("focus_at", opts.focus_at, f"focus_at={opts.focus_at!r}: not a "
+        raise ParameterError("focus_at", opts.pose.focus_at, f"focus_at={opts.pose.focus_at!r}: not a "
                              f"pixel", "give 'focus_at' as the column and row of an output "
                              "pixel") from None
     if not (0 <= x < w and 0 <= y < h):
-        raise ParameterError("focus_at", opts.focus_at,
+        raise ParameterError("focus_at", opts.pose.focus_at,
                              f"focus_at={x},{y}: outside the {w}x{h} image",
                              f"give a column 0..{w - 1} and a row 0..{h - 1}")
     return x + 0.5, y + 0.5, f"depth probe at {x},{y}"
@@ -219,10 +219,10 @@ def measure_focus(opts: ConvertOptions) -> tuple[float, str, dict]:
     from_mm = _FIRST_FOCUS_MM / _mm_per_unit(opts)
     focus = got[0] if got is not None else from_mm
     fade = focus
-    st = start_plan(dataclasses.replace(opts, focus=focus, focus_from=label))
+    st = start_plan(opts.replace(focus=focus, focus_from=label))
     for rounds in range(1, MAX_ROUNDS + 1):
         axial, _ = _probe_window(opts, st, x, y, fade)
-        if rounds == 1 and opts.focus_at is None and not np.isfinite(axial).any():
+        if rounds == 1 and opts.pose.focus_at is None and not np.isfinite(axial).any():
             # nothing with depth around the frame's centre: the lit surface nearest to it
             near = nearest_lit_point(opts, st, fade)
             if near is None:
@@ -230,9 +230,9 @@ def measure_focus(opts: ConvertOptions) -> tuple[float, str, dict]:
                     "point_px": None, "rounds": 0, "focus": from_mm}
             x, y, label = near
             axial, _ = _probe_window(opts, st, x, y, fade)
-        new, info = _window_focus(axial, label, strict=opts.focus_at is not None)
+        new, info = _window_focus(axial, label, strict=opts.pose.focus_at is not None)
         # the point under the new focus's camera: moved by breathing?
-        new_st = start_plan(dataclasses.replace(opts, focus=new, focus_from=label))
+        new_st = start_plan(opts.replace(focus=new, focus_from=label))
         shift = pixel_shift_px(st.povray_camera, new_st.povray_camera, st.film, x, y)
         info.update({"fade_distance": fade, "last_shift_px": shift})
         in_range = FADE_RANGE[0] <= new / fade <= FADE_RANGE[1]
@@ -244,20 +244,17 @@ def measure_focus(opts: ConvertOptions) -> tuple[float, str, dict]:
 
 
 def _mm_per_unit(opts: ConvertOptions) -> float:
-    if opts.units not in UNITS_MM:
-        raise ParameterError("units", opts.units, f"units={opts.units!r}: unknown unit",
-                             "use one of mm, cm, m, in")
-    return UNITS_MM[opts.units]
+    return UNITS_MM[opts.pose.units]
 
 
 def pinhole_focus_note(opts: ConvertOptions) -> str | None:
     """The plan's note when :func:`resolve_focus` gave a pinhole plan the default
     focus (``focus_from`` :data:`PINHOLE_FOCUS_FROM`), else None."""
-    if opts.focus_from != PINHOLE_FOCUS_FROM:
+    if opts.pose.focus_from != PINHOLE_FOCUS_FROM:
         return None
     return (f"the camera gives no focus (no focal_point with focal blur, no look_at) and "
             f"method pinhole needs none: no depth probe ran and the lens is focused at "
-            f"focus={opts.focus:g} ({_FIRST_FOCUS_MM / 1000:g} m), which sets only the "
+            f"focus={opts.pose.focus:g} ({_FIRST_FOCUS_MM / 1000:g} m), which sets only the "
             f"field of view (it changes a little with the focus); give 'focus' for the "
             f"framing at another distance")
 
@@ -275,17 +272,17 @@ def resolve_focus(opts: ConvertOptions) -> tuple[ConvertOptions, dict | None]:
     Raises :class:`ParameterError` for ``focus`` with ``focus_at``, a pixel outside the
     image, or a point the probe finds no depth at.
     """
-    if opts.focus is not None:
-        if opts.focus_at is not None:
-            raise ParameterError("focus_at", opts.focus_at, "'focus' and 'focus_at' both given",
+    if opts.pose.focus is not None:
+        if opts.pose.focus_at is not None:
+            raise ParameterError("focus_at", opts.pose.focus_at, "'focus' and 'focus_at' both given",
                                  "give one of them")
-        return dataclasses.replace(opts, focus_from=opts.focus_from or "option"), None
-    if opts.focus_at is None:
+        return opts.replace(focus_from=opts.pose.focus_from or "option"), None
+    if opts.pose.focus_at is None:
         got = camera_focus(opts)
         if got is not None:
-            return dataclasses.replace(opts, focus=got[0], focus_from=got[1]), None
-        if opts.method == "pinhole":       # no blur to focus: no depth probe either
-            return dataclasses.replace(opts, focus=_FIRST_FOCUS_MM / _mm_per_unit(opts),
+            return opts.replace(focus=got[0], focus_from=got[1]), None
+        if opts.sampling.method == "pinhole":       # no blur to focus: no depth probe either
+            return opts.replace(focus=_FIRST_FOCUS_MM / _mm_per_unit(opts),
                                        focus_from=PINHOLE_FOCUS_FROM), None
     focus, label, info = measure_focus(opts)
-    return dataclasses.replace(opts, focus=focus, focus_from=label), info
+    return opts.replace(focus=focus, focus_from=label), info

@@ -13,12 +13,10 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import math
 import os
 from pathlib import Path
 from typing import Callable
 
-from povlens.errors import ParameterError
 from povlens.plan import speculative
 from povlens.plan.adaptive import adaptive_rows, apply_to_plan, limit_samples, real_blur_model_error
 from povlens.plan.auto import choose_method, measure_depth_map, start_depth_probe
@@ -95,11 +93,7 @@ def _choose_automatically(opts: ConvertOptions, render_early, cleanup: contextli
                           depth_probe=None) -> _AutoChoice:
     """``--method auto``: probe the scene, decide, and (``speculate``) start the
     likely render meanwhile.  Everything started is registered on ``cleanup``."""
-    if not (opts.tolerance_px > 0 and math.isfinite(opts.tolerance_px)):
-        raise ParameterError("tolerance_px", opts.tolerance_px,
-                             f"tolerance_px={opts.tolerance_px}: must be a positive number "
-                             f"of pixels")
-    base = dataclasses.replace(opts, method="mesh")
+    base = opts.replace(method="mesh")
     start = start_plan(base)                              # validates the inputs first
     # The depth probe's POV-Ray processes (mostly idle start-up) and 'povray --version'
     # run while the pupil table is built and the model error measured.  The probe is
@@ -114,13 +108,13 @@ def _choose_automatically(opts: ConvertOptions, render_early, cleanup: contextli
     # the batches: same table, same model error.
     reuse = PlanReuse(pupil_table=table, model_error=plan0.model_error,
                       version=lambda: plan0.povray.version)
-    guess = speculative.early_guess(opts, plan0) if opts.speculate else "none"
+    guess = speculative.early_guess(opts, plan0) if opts.auto.speculate else "none"
     early = view = None
     # the lens samples first: where they are wanted, they are the critical path
-    if render_early is not None and not opts.adaptive and guess in ("mesh", "either"):
+    if render_early is not None and not opts.sampling.adaptive and guess in ("mesh", "either"):
         early = speculative.start_early_samples(opts, start, reuse, table, render_early)
         cleanup.callback(early.render.cancel)
-    if opts.auto_samples and guess in ("views", "either"):
+    if opts.sampling.auto_samples and guess in ("views", "either"):
         view = speculative.start_speculative_focal_blur(opts, plan0)
         cleanup.callback(view.cancel)
     decision, adaptive = choose_method(base, plan0, plan0.thin_lens, start.lens, plan0.film,
@@ -128,11 +122,11 @@ def _choose_automatically(opts: ConvertOptions, render_early, cleanup: contextli
     decision = colour_decision(opts, start.lens, plan0, decision)    # --dispersion
     choice = _AutoChoice(opts, opts, start, reuse, decision, adaptive, early, view)
     _settle_speculation(choice, guess)
-    samples = decision.samples if opts.auto_samples else opts.samples
-    if not opts.auto_samples:
-        decision.add_remark(f"--samples {opts.samples} given: it replaces the decision's "
+    samples = decision.samples if opts.sampling.auto_samples else opts.sampling.sample_count
+    if not opts.sampling.auto_samples:
+        decision.add_remark(f"--samples {opts.sampling.sample_count} given: it replaces the decision's "
                             f"{decision.samples}")
-    choice.chosen = dataclasses.replace(opts, method=decision.method, samples=samples)
+    choice.chosen = opts.replace(method=decision.method, samples=samples)
     return choice
 
 
@@ -141,7 +135,7 @@ def _adaptive_sampling(opts: ConvertOptions, choice: _AutoChoice | None
     """The row bands of an adaptive mesh plan (from auto's probe, or a probe of its
     own), the options with the sample count they need, and the numbers of the probe
     run here (None: none ran)."""
-    if not (opts.adaptive and opts.method == "mesh"):
+    if not (opts.sampling.adaptive and opts.sampling.method == "mesh"):
         return opts, None, None
     adaptive = choice.adaptive if choice is not None else None
     info = None
@@ -151,12 +145,12 @@ def _adaptive_sampling(opts: ConvertOptions, choice: _AutoChoice | None
         axial = measure_depth_map(opts, film, plan=plan1)
         info = depth_limits(axial)[2] | {"probe_width": int(axial.shape[1]),
                                          "probe_height": int(axial.shape[0])}
-        adaptive = adaptive_rows(model, axial, film, opts.samples,
+        adaptive = adaptive_rows(model, axial, film, opts.sampling.sample_count,
                                  model_error=real_blur_model_error(lens1, plan1, model, film,
                                                                    axial))
     else:
-        adaptive = limit_samples(adaptive, opts.samples)
-    return dataclasses.replace(opts, samples=max(adaptive.band_samples)), adaptive, info
+        adaptive = limit_samples(adaptive, opts.sampling.sample_count)
+    return opts.replace(samples=max(adaptive.band_samples)), adaptive, info
 
 
 def _keep_speculative_view(view: speculative.SpeculativeView, outdir: Path) -> None:
@@ -206,31 +200,31 @@ def convert(opts: ConvertOptions, render_early=None, depth_probe=None) -> Plan:
     stopped and its temporary files removed, and no plan.json of this call is
     left half-written.
     """
-    opts = dataclasses.replace(opts, scene=str(resolve_scene_path(opts.scene)))
+    opts = opts.replace(scene=str(resolve_scene_path(opts.scene)))
     opts = with_povray_options_checked(opts)              # before any POV-Ray run
     out = Path(opts.outdir)
     out.mkdir(parents=True, exist_ok=True)
     opts, focus_info = resolve_focus(opts)                # option, camera, or depth probe
     with contextlib.ExitStack() as cleanup:               # unwinds what auto started
         choice = None
-        if opts.method == "auto":
+        if opts.sampling.method == "auto":
             choice = _choose_automatically(opts, render_early, cleanup, depth_probe)
             opts = choice.chosen
         opts, adaptive, range_info = _adaptive_sampling(opts, choice)
         plan = (make_plan(opts) if choice is None
                 else finish_plan(opts, choice.start, choice.reuse)[0])
         if adaptive is not None:
-            apply_to_plan(plan, adaptive, opts.batch_size)
+            apply_to_plan(plan, adaptive, opts.sampling.batch_size)
         if choice is not None:
             range_info = choice.decision.numbers.get("depth_probe")
         if focus_info is not None or range_info is not None:
             plan.depth_probe = probe_record(range_info, focus_info)
             # the probe's blind spot: the scene's own fog and media
-            plan.add_note(atmosphere_note(opts.scene, opts.library_paths))
+            plan.add_note(atmosphere_note(opts.scene, opts.povray.library_paths))
         plan.add_note(pinhole_focus_note(opts))           # pinhole: no probe for the focus
         if choice is not None:
             req = choice.requested
-            plan.record_auto_choice(choice.decision, req.tolerance_px, req.auto_samples)
+            plan.record_auto_choice(choice.decision, req.auto.tolerance_px, req.sampling.auto_samples)
             if choice.early is not None:
                 # the samples the final plan adds follow in the same pipeline; what the
                 # folder had rendered stays (only the count changed: stale_samples)

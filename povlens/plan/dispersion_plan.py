@@ -40,7 +40,7 @@ def apply_dispersion(opts, plan, lens, table) -> None:
     plan : the plan being finished (its field meshes already chosen).
     lens : the stopped-down lens; table : its exit-pupil table (None for pinhole).
     """
-    if not opts.dispersion:
+    if not opts.sampling.dispersion:
         return
     if not has_abbe_numbers(lens):
         plan.add_note(f"--dispersion: the lens file {lens.source} gives no Abbe numbers "
@@ -54,9 +54,9 @@ def apply_dispersion(opts, plan, lens, table) -> None:
     plan.dispersion = info
     colour = (f"lateral colour up to {info['max_lateral_colour_px']:.2g} px, longitudinal "
               f"{info['longitudinal_colour_mm'] or 0.0:.2g} mm")
-    if opts.method != "mesh":
+    if opts.sampling.method != "mesh":
         plan.add_note(f"--dispersion: only the mesh method renders colour fringes; this "
-                      f"{opts.method} render shows none ({colour})")
+                      f"{opts.sampling.method} render shows none ({colour})")
         return
     # the samples draw from the d-line table grown to hold the band's pass regions: per-pixel
     # meshes from its polygons, field meshes from the ellipses that hold them
@@ -91,13 +91,13 @@ def colour_decision(opts, lens, plan, decision):
         :data:`~povlens.plan.decision.MIN_SAMPLES` samples (each colour channel draws on
         about a third of a spectral render's samples) with the reason.
     """
-    if not opts.dispersion or decision.method == "mesh" or not disperses(lens):
+    if not opts.sampling.dispersion or decision.method == "mesh" or not disperses(lens):
         return decision
     film, focus = plan.film, plan.focus
     ca = chromatic_aberration(lens, focus.film_distance_mm, focus.object_distance_from_film_mm,
                               film.max_field_radius_mm, film.pixel_pitch_mm)
     colour_px = max(ca["max_lateral_colour_px"], ca["longitudinal_blur_px"] or 0.0)
-    if colour_px < opts.tolerance_px:
+    if colour_px < opts.auto.tolerance_px:
         decision.add_remark(f"--dispersion: the lens's colour ({colour_px:.2g} px) is within "
                             f"the tolerance; the {decision.method} view renders none")
         return decision
@@ -107,6 +107,6 @@ def colour_decision(opts, lens, plan, decision):
         reasons=decision.reasons + [
             f"-> mesh: --dispersion, and the lens's colour (lateral {ca['max_lateral_colour_px']:.2g}"
             f" px, longitudinal blur {ca['longitudinal_blur_px'] or 0.0:.2g} px) exceeds the "
-            f"tolerance {opts.tolerance_px:g} px, which only lens samples render "
+            f"tolerance {opts.auto.tolerance_px:g} px, which only lens samples render "
             f"({decision.method} was chosen without colour)"],
         numbers=dict(decision.numbers, colour_px=colour_px))

@@ -41,7 +41,7 @@ from povlens.lens.paraxial import paraxial_data, stopped_down
 from povlens.lens.prescription import LensPrescription, read_lens
 from povlens.plan.aperture import apply_aperture_shape, inputs_of_shape, shape_of_options
 from povlens.plan.dispersion_plan import apply_dispersion
-from povlens.plan.options import METHODS, ConvertOptions, povray_options_of, stored_values
+from povlens.plan.options import ConvertOptions, povray_options_of, stored_values
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import (CameraPlacement, FocusSolution, Inputs, LensSummary, Plan,
                                  PovrayCamera, PovraySettings)
@@ -82,19 +82,19 @@ def _unit(v) -> np.ndarray:
 
 def _scene_camera(opts: ConvertOptions):
     """The scene's camera, or None when the options give location and look_at."""
-    if opts.location is not None or opts.look_at is not None:
+    if opts.pose.location is not None or opts.pose.look_at is not None:
         return None
     # the user's library paths and clock: the camera POV-Ray renders with them
-    return parse_scene_camera(opts.scene, opts.width, opts.height,
-                              library_paths=opts.library_paths, clock=opts.clock)
+    return parse_scene_camera(opts.scene, opts.film.width, opts.film.height,
+                              library_paths=opts.povray.library_paths, clock=opts.povray.clock)
 
 
 def _camera_focus(opts: ConvertOptions, cam) -> tuple[float, str] | None:
     """:func:`camera_focus` of an already read scene camera ``cam`` (None: the options')."""
     if cam is None:
-        if opts.location is None or opts.look_at is None:
+        if opts.pose.location is None or opts.pose.look_at is None:
             return None                   # _camera_basis says what is missing
-        d = float(np.linalg.norm(np.asarray(opts.look_at, float) - np.asarray(opts.location,
+        d = float(np.linalg.norm(np.asarray(opts.pose.look_at, float) - np.asarray(opts.pose.location,
                                                                                   float)))
         return (d, "look_at") if d > 0 and math.isfinite(d) else None
     fd = cam.focal_distance
@@ -131,16 +131,16 @@ def _camera_basis(opts: ConvertOptions, cam):
     """(location, right, up, forward, source) from options or the scene's camera
     ``cam`` (:func:`_scene_camera`)."""
     if cam is None:
-        if opts.location is None or opts.look_at is None:
-            missing = "location" if opts.location is None else "look_at"
+        if opts.pose.location is None or opts.pose.look_at is None:
+            missing = "location" if opts.pose.location is None else "look_at"
             raise ParameterError(missing, None, "'location' and 'look_at' go together",
                                  "give both 'location' and 'look_at' (points x, y, z in "
                                  "scene units)")
-        loc = np.asarray(opts.location, float)
-        fwd = _unit(np.asarray(opts.look_at, float) - loc)
-        right = np.cross(np.asarray(opts.sky, float), fwd)
+        loc = np.asarray(opts.pose.location, float)
+        fwd = _unit(np.asarray(opts.pose.look_at, float) - loc)
+        right = np.cross(np.asarray(opts.pose.sky, float), fwd)
         if np.linalg.norm(right) < 1e-12:
-            raise ParameterError("sky", opts.sky, "'sky' is parallel to the view direction",
+            raise ParameterError("sky", opts.pose.sky, "'sky' is parallel to the view direction",
                                  "choose another 'sky'")
         right = _unit(right)
         up = np.cross(fwd, right)
@@ -210,8 +210,8 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
 
     Parameters
     ----------
-    opts : the conversion's options (any method but ``auto``'s decision is not made
-        here; ``method`` is only validated).  Without ``focus`` (and ``focus_at``), the
+    opts : the conversion's options (any method; ``auto``'s decision is not made
+        here).  Without ``focus`` (and ``focus_at``), the
         camera's (:func:`camera_focus`); what needs the depth probe is
         :func:`povlens.plan.autofocus.resolve_focus`'s.
 
@@ -220,33 +220,25 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
     PlanStart
         Cheap to compute: no pupil table, no rendering.
     """
-    if opts.method not in METHODS:
-        raise ParameterError("method", opts.method, f"method={opts.method!r}: unknown method",
-                             f"use one of {', '.join(METHODS)}")
-    if opts.units not in UNITS_MM:
-        raise ParameterError("units", opts.units, f"units={opts.units!r}: unknown unit",
-                             "use one of mm, cm, m, in")
-    if opts.samples < 1:
-        raise ParameterError("samples", opts.samples,
-                             f"samples={opts.samples}: must be at least 1")
+    # the options' own values were checked when they were made (plan.options)
     if not Path(opts.scene).is_file():
         raise UsageError(f"scene file {opts.scene} does not exist", "check the path")
-    mm_per_unit = UNITS_MM[opts.units]
-    povray = povray_options_of(opts)      # checked before any POV-Ray run or scene read
-    opts = dataclasses.replace(opts, library_paths=povray.library_paths, clock=povray.clock,
-                               povray_options=povray.extra_options)
-    lens = stopped_down(read_lens(opts.lens), stop_diameter_mm=opts.stop_diameter_mm,
-                        f_number=opts.f_number)
-    lens = shaped_lens(lens, shape_of_options(opts))    # iris / mask (plan.aperture)
+    mm_per_unit = UNITS_MM[opts.pose.units]
+    povray = povray_options_of(opts.povray)      # checked before any POV-Ray run or scene read
+    opts = opts.replace(library_paths=povray.library_paths, clock=povray.clock,
+                        povray_options=povray.extra_options)
+    lens = stopped_down(read_lens(opts.lens), stop_diameter_mm=opts.aperture.stop_diameter_mm,
+                        f_number=opts.aperture.f_number)
+    lens = shaped_lens(lens, shape_of_options(opts.aperture))    # iris / mask (plan.aperture)
     p = paraxial_data(lens)
     cam = _scene_camera(opts)
     film, proportions = film_of(opts, cam)
-    if opts.shift_mm is not None:        # lens shift: the frame off the axis (lens.film)
-        sx, sy = parse_shift(opts.shift_mm)
+    if opts.film.shift_mm is not None:        # lens shift: the frame off the axis (lens.film)
+        sx, sy = parse_shift(opts.film.shift_mm)
         film = dataclasses.replace(film, shift_x_mm=sx, shift_y_mm=sy)
     focus, focus_from = _focus_of(opts, cam)
     focus_mm = focus * mm_per_unit
-    film_d, object_d, thick_d, spot = _focus(lens, p, focus_mm, opts.real_focus)
+    film_d, object_d, thick_d, spot = _focus(lens, p, focus_mm, opts.film.real_focus)
     model = fit_thin_lens(lens, film_d, object_d, film)
     loc, right, up, fwd, cam_source = _camera_basis(opts, cam)
     # lens shift: an off-axis frustum, POV-Ray's direction tilted by the shift while
@@ -329,23 +321,23 @@ def film_of(opts: ConvertOptions, cam) -> tuple[Film, str | None]:
         kept as given; the note then says the camera's proportions are not used.
         Otherwise the film takes the image's proportions (square pixels), no note.
     """
-    w, h = int(opts.width), int(opts.height)
+    w, h = int(opts.film.width), int(opts.film.height)
     if w < 1 or h < 1:
-        return Film.from_diagonal(opts.film_diagonal_mm, w, h), None   # raises
+        return Film.from_diagonal(opts.film.film_diagonal_mm, w, h), None   # raises
     ratio = _camera_proportions(cam, w, h)
     differ = None if ratio is None else (
         f"the camera's proportions |right|/|up| = {ratio:.4g} ({cam.source}) differ from "
         f"the image's {w}x{h} ({w / h:.4g})")
-    if opts.film_size_mm is not None:
-        fw, fh = (float(v) for v in opts.film_size_mm)
+    if opts.film.film_size_mm is not None:
+        fw, fh = (float(v) for v in opts.film.film_size_mm)
         note = None if differ is None else (
             f"{differ}: film_size_mm={fw:g},{fh:g} sets the film instead (POV-Ray would "
             f"stretch the picture to the camera's proportions)")
         return Film(fw, fh, w, h), note
-    square = Film.from_diagonal(opts.film_diagonal_mm, w, h)          # validates
+    square = Film.from_diagonal(opts.film.film_diagonal_mm, w, h)          # validates
     if ratio is None:
         return square, None
-    fw = float(opts.film_diagonal_mm) / math.hypot(1.0, 1.0 / ratio)
+    fw = float(opts.film.film_diagonal_mm) / math.hypot(1.0, 1.0 / ratio)
     film = Film(fw, fw / ratio, w, h)
     tall = (film.height_mm / h) / (film.width_mm / w)
     return film, (f"{differ}: as POV-Ray does, the film takes the camera's proportions "
@@ -367,20 +359,17 @@ def camera_notes(cam, proportions_note: str | None = None) -> list[str]:
 def _focus_of(opts: ConvertOptions, cam) -> tuple[float, str]:
     """The focus distance (scene units) and its source: the option, else the camera's
     (:func:`camera_focus`); :class:`ParameterError` when neither gives one."""
-    if opts.focus is None:
-        got = None if opts.focus_at is not None else _camera_focus(opts, cam)
+    if opts.pose.focus is None:
+        got = None if opts.pose.focus_at is not None else _camera_focus(opts, cam)
         if got is None:
-            why = ("focus_at needs the depth probe" if opts.focus_at is not None else
+            why = ("focus_at needs the depth probe" if opts.pose.focus_at is not None else
                    "no focus given, and the camera has neither focal_point (with "
                    "focal_blur) nor look_at")
             raise ParameterError("focus", None, why,
                                  "give 'focus' (scene units), or convert with "
                                  "povlens.plan.convert.convert, which measures it")
         return got
-    if not (opts.focus > 0 and math.isfinite(opts.focus)):
-        raise ParameterError("focus", opts.focus,
-                             f"focus={opts.focus}: must be a positive distance in scene units")
-    return float(opts.focus), opts.focus_from or "option"
+    return float(opts.pose.focus), opts.pose.focus_from or "option"
 
 
 def round_robin_batches(n_samples: int, batch_size: int | None = None) -> list[list[int]]:
@@ -417,12 +406,12 @@ def _inputs(opts: ConvertOptions, st: PlanStart) -> Inputs:
     return Inputs(
         **stored_values(opts),
         scene=str(Path(opts.scene).resolve()), lens=st.lens.source,
-        lens_sha256=st.lens.sha256(), focus=st.focus, samples=opts.samples,
+        lens_sha256=st.lens.sha256(), focus=st.focus, samples=opts.sampling.sample_count,
         camera_from=st.camera_from, focus_from=st.focus_from,
-        focus_at=None if opts.focus_at is None else tuple(int(v) for v in opts.focus_at),
+        focus_at=None if opts.pose.focus_at is None else tuple(int(v) for v in opts.pose.focus_at),
         library_paths=st.povray.library_paths, clock=st.povray.clock,
         povray_options=st.povray.extra_options,
-        ray_mesh=opts.ray_mesh if opts.method == "mesh" else None,
+        ray_mesh=opts.sampling.ray_mesh if opts.sampling.method == "mesh" else None,
         shift_mm=st.film.shift_mm if st.film.shifted else None,
         **inputs_of_shape(st.lens.aperture_shape))
 
@@ -430,10 +419,7 @@ def _inputs(opts: ConvertOptions, st: PlanStart) -> Inputs:
 def _field_mesh(opts: ConvertOptions, plan: Plan, st: PlanStart, placement, table) -> None:
     """Give a mesh plan of ``--ray-mesh field`` its certified field meshes and the
     render size they need (:mod:`povlens.plan.field_grid`)."""
-    if opts.ray_mesh not in ("field", "pixel"):
-        raise ParameterError("ray_mesh", opts.ray_mesh, f"ray_mesh={opts.ray_mesh!r}: unknown "
-                             "kind of ray mesh", "use field or pixel")
-    if opts.method != "mesh" or opts.ray_mesh != "field":
+    if opts.sampling.method != "mesh" or opts.sampling.ray_mesh != "field":
         return
     from povlens.plan.field_grid import choose_field_mesh
     film = plan.film
@@ -450,7 +436,7 @@ def _field_mesh(opts: ConvertOptions, plan: Plan, st: PlanStart, placement, tabl
 
 def _antialias_note(opts: ConvertOptions, st: PlanStart) -> str | None:
     """:data:`MESH_ANTIALIAS_NOTE` for a mesh plan whose options turn anti-aliasing on."""
-    if opts.method != "mesh" or not st.povray.antialiasing():
+    if opts.sampling.method != "mesh" or not st.povray.antialiasing():
         return None
     last = [o for o in st.povray.extra_options
             if PovrayOptions(extra_options=(o,)).antialiasing() is not None][-1]
@@ -502,7 +488,7 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReus
     table, model_error = reuse.pupil_table, reuse.model_error
     # a pinhole render needs neither the exit-pupil table nor the thin-lens model's
     # error (issue 14: ~1 s of a 96x72 render); auto's pinhole keeps what it measured
-    skip = opts.method == "pinhole" and table is None and model_error is None
+    skip = opts.sampling.method == "pinhole" and table is None and model_error is None
     if table is None and not skip:  # exact vignetting; saved in OUTDIR for the render
         table, _ = cached_pupil_table(RenderFolder(opts.outdir).pupil_npz, lens,
                                       st.film_distance_mm, film.max_field_radius_mm,
@@ -529,10 +515,10 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReus
         thin_lens=model, povray_camera=st.povray_camera, model_error=model_error,
         povray=PovraySettings(version, rw, rh, drop),
         sink_centre=_vector(default_sink_centre(st.location, st.forward)),
-        batches=round_robin_batches(opts.samples, opts.batch_size), notes=list(st.notes))
+        batches=round_robin_batches(opts.sampling.sample_count, opts.sampling.batch_size), notes=list(st.notes))
     plan.add_note(_antialias_note(opts, st))
     plan.add_note(PINHOLE_NOTE if skip else None)
-    plan.add_note(shift_focal_blur_note(plan) if opts.method == "focal-blur" else None)
+    plan.add_note(shift_focal_blur_note(plan) if opts.sampling.method == "focal-blur" else None)
     _field_mesh(opts, plan, st, placement, table)
     apply_dispersion(opts, plan, lens, table)    # --dispersion: colour numbers, wider disc
     apply_aperture_shape(opts, plan, lens, table)  # iris/mask: notes, the iris's pupil domain
@@ -606,8 +592,8 @@ def make_plan(opts: ConvertOptions) -> Plan:
     -------
     Plan
     """
-    if opts.method == "auto":
-        raise ParameterError("method", opts.method, "make_plan: method='auto' is decided by "
+    if opts.sampling.method == "auto":
+        raise ParameterError("method", opts.sampling.method, "make_plan: method='auto' is decided by "
                              "convert() (it renders a depth probe)",
                              "call convert(), or give a concrete method")
     return make_plan_with_lens(opts)[0]

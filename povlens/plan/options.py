@@ -37,7 +37,8 @@ from povlens.pov.povray_options import PovrayOptions
 __all__ = ["ConvertOptions", "Pose", "FilmOptions", "ApertureOptions", "Sampling",
            "AutoOptions", "PovrayPassthrough", "DaskOptions", "dask_options", "OptionSpec", "option", "options", "RECORDS",
            "METHODS", "FIXED_SAMPLES", "povray_options_of", "stored_values",
-           "parse_vector", "parse_pixel", "parse_clock"]
+           "parse_vector", "parse_pixel", "parse_clock", "with_povray_options_checked",
+           "SCHEDULER_ENV_VAR"]
 
 #: Render methods: ``auto`` chooses one of the other three from measurements.
 METHODS = ("auto", "pinhole", "focal-blur", "mesh")
@@ -102,6 +103,14 @@ def positive(name: str, value) -> float:
     v = _number(name, value)
     if not v > 0:
         raise ParameterError(name, value, f"{name}={value}: must be positive")
+    return v
+
+
+def distance(name: str, value) -> float:
+    v = _number(name, value)
+    if not v > 0:
+        raise ParameterError(name, value, f"{name}={value}: must be a positive distance in "
+                                          f"scene units")
     return v
 
 
@@ -233,7 +242,7 @@ class Pose(_Record):
         "camera's focal_point if it has focal blur, else the distance to its look_at, else "
         "what the depth probe sees at the centre of the frame); convert/render: A:B with "
         "--frames N is a focus pull from A to B (even steps in dioptres), D1,D2,... one "
-        "frame per distance", flag="--focus", metavar="DIST", check=positive,
+        "frame per distance", flag="--focus", metavar="DIST", check=distance,
         unit="scene units", exclusive="focus", stored=False)
     focus_at: tuple[int, int] | None = option(
         None, "focus on what the depth probe sees at output pixel X,Y (column and row from "
@@ -466,6 +475,10 @@ class ConvertOptions:
         return getattr(getattr(self, _GROUP_OF[name]), name)
 
 
+#: The environment variable naming the Dask scheduler when ``--scheduler`` is not given.
+SCHEDULER_ENV_VAR = "POVLENS_SCHEDULER"
+
+
 @dataclasses.dataclass(frozen=True)
 class DaskOptions(_Record):
     """Where ``povlens render`` renders the lens samples: here, or on a Dask cluster
@@ -502,6 +515,14 @@ def stored_values(opts: ConvertOptions) -> dict:
     """The options the plan's ``inputs`` keep as given (those declared ``stored``);
     the others are kept as the conversion resolved them (:mod:`povlens.plan.fixed`)."""
     return {f.name: opts.value(f.name) for _, f, spec in options() if spec.stored}
+
+
+def with_povray_options_checked(opts: ConvertOptions) -> ConvertOptions:
+    """``opts`` with its POV-Ray options checked and normalised as the plan stores
+    them (:func:`povray_options_of`: absolute library paths, a float clock, tuples)."""
+    checked = povray_options_of(opts.povray)
+    return opts.replace(library_paths=checked.library_paths, clock=checked.clock,
+                        povray_options=checked.extra_options)
 
 
 def povray_options_of(opts) -> PovrayOptions:

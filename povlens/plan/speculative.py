@@ -51,12 +51,12 @@ def lens_rules_out_views(opts: ConvertOptions, plan0: Plan) -> bool:
     True when, at the plan's standard depths (half, once, twice and ten times the
     focus distance), the distortion, half the blur-size error or half the shape
     error (the measures of :func:`povlens.plan.decision.decide`) is over the
-    budget ``opts.tolerance_px``.  The vignetting does not count: the views get it
+    budget ``opts.auto.tolerance_px``.  The vignetting does not count: the views get it
     as a map (:mod:`povlens.rendering.vignetting`), and what the map cannot carry
     depends on the scene's defocus (:func:`vignetting_may_choose_mesh`).
     """
     e = plan0.model_error
-    tol = opts.tolerance_px
+    tol = opts.auto.tolerance_px
     shape = shape_error_px(np.asarray(e.blur_real_px), np.asarray(e.elongation))
     return bool(e.max_distortion_px >= tol or e.max_blur_size_error_px / 2 >= tol
                 or float(np.max(shape)) / 2 >= tol)
@@ -75,8 +75,8 @@ def vignetting_may_choose_mesh(opts: ConvertOptions, plan0: Plan) -> bool:
     e = plan0.model_error
     illum = e.min_relative_illumination
     blur = float(np.max(e.blur_model_px)) if np.size(e.blur_model_px) else 0.0
-    return bool(opts.vignetting and illum < STRONG_VIGNETTING
-                and 0.5 * blur >= opts.tolerance_px)
+    return bool(opts.sampling.vignetting and illum < STRONG_VIGNETTING
+                and 0.5 * blur >= opts.auto.tolerance_px)
 
 
 def early_guess(opts: ConvertOptions, plan0: Plan) -> str:
@@ -97,8 +97,8 @@ def early_guess(opts: ConvertOptions, plan0: Plan) -> str:
     if lens_rules_out_views(opts, plan0):
         return "mesh"
     e = plan0.model_error      # a shaped stop: focal_blur is out wherever blur shows
-    if ((getattr(opts, "aperture_blades", None) or getattr(opts, "aperture_image", None))
-            and np.size(e.blur_model_px) and np.max(e.blur_model_px) >= opts.tolerance_px):
+    if ((opts.aperture.aperture_blades or opts.aperture.aperture_image)
+            and np.size(e.blur_model_px) and np.max(e.blur_model_px) >= opts.auto.tolerance_px):
         return "mesh"
     if vignetting_may_choose_mesh(opts, plan0):
         return "either"
@@ -178,13 +178,13 @@ def start_early_samples(opts: ConvertOptions, start: PlanStart, reuse: PlanReuse
     table : the exit-pupil table, for the render.
     render_early : starts the render of a plan (see :func:`povlens.plan.convert.convert`).
     """
-    n = MIN_SAMPLES if opts.auto_samples else opts.samples
-    eopts = dataclasses.replace(opts, method="mesh", samples=n)
+    n = MIN_SAMPLES if opts.sampling.auto_samples else opts.sampling.sample_count
+    eopts = opts.replace(method="mesh", samples=n)
     plan = finish_plan(eopts, start, reuse)[0]
     plan.record_auto_choice(Decision(
         "mesh", n, ["provisional: the lens alone rules out the pinhole and focal_blur views "
                     "(distortion, blur size or shape), or its cat's eye may; the depth "
                     "probe decides"],
-        provisional=True), opts.tolerance_px, opts.auto_samples)
+        provisional=True), opts.auto.tolerance_px, opts.sampling.auto_samples)
     write_folder(Path(opts.outdir), plan)
     return EarlySamples(plan, render_early(plan, start.lens, table))

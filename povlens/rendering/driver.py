@@ -12,7 +12,6 @@ render resumes.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import sys
@@ -182,7 +181,7 @@ def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: boo
         return EarlyRender(Path(opts.outdir), plan, lens, table, POVRAY_IN_FLIGHT * jobs,
                            quiet)
 
-    plan = convert(dataclasses.replace(opts, speculate=True), render_early=render_early,
+    plan = convert(opts.replace(speculate=True), render_early=render_early,
                    depth_probe=depth_probe)
     if on_plan is not None:
         on_plan(plan)

@@ -64,12 +64,23 @@ class FrameRecord:
     seconds: float | None = None
 
 
+#: The options ``frames.json`` records, in the order it has written them since its first
+#: version (``samples`` the sample count, ``auto_samples`` whether auto sets it).
+SIGNATURE_KEYS = (
+    "scene", "lens", "f_number", "stop_diameter_mm", "film_diagonal_mm", "film_size_mm",
+    "units", "width", "height", "method", "samples", "batch_size", "seed", "location",
+    "look_at", "sky", "real_focus", "vignetting", "jitter", "tolerance_px", "auto_samples",
+    "adaptive", "focus_at", "library_paths", "clock", "povray_options", "ray_mesh", "shift_mm",
+    "aperture_blades", "blade_curvature", "blade_rotation_deg", "aperture_image", "dispersion")
+
+
 def _signature(opts: ConvertOptions) -> dict:
     """What makes two frames folders the same apart from the focus: every option but
     the output folder and the focus (as JSON values)."""
-    d = dataclasses.asdict(opts)
-    for k in ("outdir", "focus", "speculate", "focus_from"):
-        d.pop(k, None)
+    derived = {"scene": opts.scene, "lens": opts.lens,
+               "samples": opts.sampling.sample_count,
+               "auto_samples": opts.sampling.auto_samples}
+    d = {k: derived[k] if k in derived else opts.value(k) for k in SIGNATURE_KEYS}
     return json.loads(json.dumps(d, default=str))
 
 
@@ -107,7 +118,7 @@ def _makefile(records: list[FrameRecord]) -> str:
 
 
 def _write_index(outdir: Path, opts: ConvertOptions, records: list[FrameRecord]) -> None:
-    data = {"focus_pull": [r.focus for r in records], "units": opts.units,
+    data = {"focus_pull": [r.focus for r in records], "units": opts.pose.units,
             "options": _signature(opts), "frames": [dataclasses.asdict(r) for r in records],
             "povlens": f"{shlex.quote(sys.executable)} -m povlens"}
     folder = FramesFolder(outdir)
@@ -150,8 +161,7 @@ def _records(outdir: Path, opts: ConvertOptions, focus_values: list[float]
 
 
 def _frame_options(opts: ConvertOptions, outdir: Path, record: FrameRecord) -> ConvertOptions:
-    return dataclasses.replace(opts, focus=record.focus, focus_at=None,
-                               outdir=str(outdir / record.folder))
+    return opts.replace(focus=record.focus, focus_at=None, outdir=str(outdir / record.folder))
 
 
 def _say(quiet: bool, text: str) -> None:
@@ -226,10 +236,10 @@ def render_frames(opts: ConvertOptions, focus_values: list[float], jobs: int | N
     n = len(records)
     for r in records:
         if r.done:
-            _say(quiet, f"frame {r.frame}/{n} (focus {r.focus:.6g} {opts.units}): "
+            _say(quiet, f"frame {r.frame}/{n} (focus {r.focus:.6g} {opts.pose.units}): "
                         f"already rendered")
             continue
-        _say(quiet, f"frame {r.frame}/{n}: focus {r.focus:.6g} {opts.units}")
+        _say(quiet, f"frame {r.frame}/{n}: focus {r.focus:.6g} {opts.pose.units}")
         t0 = time.perf_counter()
         plan, _ = render_frame(_frame_options(opts, outdir, r), jobs=jobs, quiet=quiet,
                                on_plan=on_plan, depth_probe=probe)

@@ -41,7 +41,7 @@ VIEW = ("render_cmd", "run_view", ["render-view", "out", "--view", "pinhole"])
 
 def options(tmp_path, **kw) -> ConvertOptions:
     kw = {"method": "pinhole", "focus": 4.0, **kw}
-    return ConvertOptions(scene=SCENE, lens="dgauss.50mm", outdir=str(tmp_path / "out"),
+    return ConvertOptions.of(scene=SCENE, lens="dgauss.50mm", outdir=str(tmp_path / "out"),
                           width=16, height=12, **kw)
 
 

@@ -29,7 +29,7 @@ def opts(tmp_path, name, **kw):
                 film_diagonal_mm=8.5, outdir=str(tmp_path / name), width=48, height=36,
                 method="mesh", samples=32, adaptive=True)
     base.update(kw)
-    return ConvertOptions(**base)
+    return ConvertOptions.of(**base)
 
 
 def test_row_args_map_film_rows_to_povray_rows():
@@ -141,7 +141,7 @@ def test_adaptive_bands_use_the_real_spot_where_it_is_larger_than_the_thin_lens_
     than the floor (before: every band 8 where the decision wanted 256)."""
     from povlens.plan.adaptive import adaptive_rows, real_blur_at, real_blur_model_error
     from povlens.plan.fixed import make_plan_with_lens
-    o = ConvertOptions(scene=str(SCENES / "paper.pov"), lens="singlet.pcx.25mm", focus=2.0,
+    o = ConvertOptions.of(scene=str(SCENES / "paper.pov"), lens="singlet.pcx.25mm", focus=2.0,
                        outdir="unused", width=48, height=36, method="mesh", samples=256)
     plan, lens = make_plan_with_lens(o)
     model, film = plan.thin_lens, plan.film

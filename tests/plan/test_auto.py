@@ -20,7 +20,7 @@ INF = math.inf
 
 def _decide(lens, f_number, focus_m, near_m, far_m, w=48, h=36, **kw):
     """Decision for a depth range [near, far] (m from the entrance pupil), measured model error."""
-    plan, L = make_plan_with_lens(ConvertOptions(
+    plan, L = make_plan_with_lens(ConvertOptions.of(
         scene=PAPER, lens=lens, focus=focus_m, outdir="unused", f_number=f_number,
         width=w, height=h, method="focal-blur"))
     model, film = plan.thin_lens, plan.film
@@ -91,7 +91,7 @@ def test_auto_plan_numbers_equal_a_plan_of_the_chosen_method(tmp_path):
     import dataclasses
 
     from povlens.plan.convert import convert, make_plan
-    opts = ConvertOptions(scene=PAPER, lens="dgauss.50mm", focus=4, outdir=str(tmp_path / "a"),
+    opts = ConvertOptions.of(scene=PAPER, lens="dgauss.50mm", focus=4, outdir=str(tmp_path / "a"),
                           width=160, height=120, method="auto")
     plan = convert(opts).to_dict()
     d = plan.pop("decision")
@@ -99,7 +99,7 @@ def test_auto_plan_numbers_equal_a_plan_of_the_chosen_method(tmp_path):
     assert plan.pop("depth_probe")["depth_range"] == d["numbers"]["depth_probe"]
     for k in ("requested_method", "tolerance_px", "auto_samples"):
         plan["inputs"].pop(k)
-    again = make_plan(dataclasses.replace(opts, outdir=str(tmp_path / "b"), method=d["method"],
+    again = make_plan(opts.replace(outdir=str(tmp_path / "b"), method=d["method"],
                                           samples=d["samples"])).to_dict()
     assert json.dumps(plan, sort_keys=True) == json.dumps(again, sort_keys=True)
     assert (tmp_path / "a" / "pupil.npz").is_file() and not list((tmp_path / "a").glob(".probe.*"))
@@ -119,14 +119,14 @@ def test_speculative_focal_blur_is_the_final_view(tmp_path):
     base = dict(scene=str(root / "scenes" / "paper.pov"), lens="telephoto.250mm", focus=4.0,
                 width=48, height=36, method="auto")
     spec = tmp_path / "spec"
-    plan = convert(ConvertOptions(outdir=str(spec), speculate=True, **base))
+    plan = convert(ConvertOptions.of(outdir=str(spec), speculate=True, **base))
     assert plan.inputs.method == "focal-blur"
     assert (spec / "view-focal-blur.exr").exists()          # rendered during convert
     assert "blur_samples 32, 256" in (spec / "focal_blur.pov").read_text()
     assert not list(spec.glob(".speculative*")) and not list(spec.glob(".*.tmp*"))
     render_outdir(spec, quiet=True)
     plain = tmp_path / "plain"
-    convert(ConvertOptions(outdir=str(plain), **base))
+    convert(ConvertOptions.of(outdir=str(plain), **base))
     assert not (plain / "view-focal-blur.exr").exists()     # convert alone renders nothing
     assert (plain / "focal_blur.pov").read_text().replace(str(plain), "") == \
         (spec / "focal_blur.pov").read_text().replace(str(spec), "")
@@ -144,7 +144,7 @@ def test_no_speculative_render_when_the_lens_rules_out_the_views(tmp_path):
     from povlens.plan.convert import convert
     root = pathlib.Path(__file__).resolve().parents[2]
     out = tmp_path / "d"
-    plan = convert(ConvertOptions(scene=str(root / "scenes" / "paper.pov"), lens="fisheye.10mm",
+    plan = convert(ConvertOptions.of(scene=str(root / "scenes" / "paper.pov"), lens="fisheye.10mm",
                                   focus=4.0, width=48, height=36, method="auto", speculate=True,
                                   outdir=str(out)))
     assert plan.inputs.method == "mesh"
@@ -203,7 +203,7 @@ def test_probe_skips_the_view_when_the_vignetting_is_not_wanted(tmp_path):
     for wanted in (True, False):
         out = tmp_path / str(wanted)
         out.mkdir()
-        opts = ConvertOptions(scene=PAPER, lens="cooke.triplet.50mm", focus=4.0,
+        opts = ConvertOptions.of(scene=PAPER, lens="cooke.triplet.50mm", focus=4.0,
                               outdir=str(out), width=96, height=72, method="mesh",
                               vignetting=wanted)
         plan = make_plan_with_lens(opts)[0]
@@ -225,7 +225,7 @@ def test_probe_renders_the_view_and_the_decision_judges_vignetting_by_it(tmp_pat
     from povlens.pov.process import render
     out = tmp_path / "o"
     out.mkdir()
-    opts = ConvertOptions(scene=PAPER, lens="cooke.triplet.50mm", focus=4.0, outdir=str(out),
+    opts = ConvertOptions.of(scene=PAPER, lens="cooke.triplet.50mm", focus=4.0, outdir=str(out),
                           width=96, height=72, method="mesh")
     plan = make_plan_with_lens(opts)[0]
     model, film = plan.thin_lens, plan.film
@@ -314,7 +314,7 @@ def test_early_guess_of_the_bundled_lenses(lens, guess):
     at the standard depths (mesh); the others' vignetting is applied as a map."""
     from povlens.plan.fixed import make_plan
     from povlens.plan.speculative import early_guess
-    opts = ConvertOptions(scene=PAPER, lens=lens, focus=4.0, outdir="unused",
+    opts = ConvertOptions.of(scene=PAPER, lens=lens, focus=4.0, outdir="unused",
                           method="focal-blur", width=160, height=120)
     plan = make_plan(opts)
     assert early_guess(opts, plan) == guess

@@ -24,7 +24,7 @@ needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ra
 
 
 def _lens_plan(tmp_path, lens, focus=4.0, w=160, h=120):
-    opts = ConvertOptions(scene=PAPER, lens=lens, focus=focus, outdir=str(tmp_path / lens),
+    opts = ConvertOptions.of(scene=PAPER, lens=lens, focus=focus, outdir=str(tmp_path / lens),
                           width=w, height=h, method="focal-blur")
     plan, L = make_plan_with_lens(opts)
     table, _ = cached_pupil_table(tmp_path / f"{lens}.npz", L, plan.focus.film_distance_mm,
@@ -85,7 +85,7 @@ def test_a_sharp_scene_through_a_vignetting_lens_is_a_view_with_the_map(tmp_path
     """paper.pov through dgauss.50mm (corners at a third of the centre's light) at
     4 m, 160x120: before the map, auto rendered 8 mesh samples for the vignetting
     alone; now the view, with the vignetting applied as a map."""
-    plan = convert(ConvertOptions(scene=PAPER, lens="dgauss.50mm", focus=4.0,
+    plan = convert(ConvertOptions.of(scene=PAPER, lens="dgauss.50mm", focus=4.0,
                                   outdir=str(tmp_path / "a"), width=160, height=120,
                                   method="auto"))
     d = plan.decision
@@ -106,7 +106,7 @@ def test_a_strongly_defocused_scene_with_a_strong_catseye_is_a_mesh_render(tmp_p
     its cat's eye is no deviation on the same scene."""
     got = {}
     for lens in ("dgauss.50mm", "tessar.50mm"):
-        got[lens] = convert(ConvertOptions(scene=CHART, lens=lens, focus=1.5,
+        got[lens] = convert(ConvertOptions.of(scene=CHART, lens=lens, focus=1.5,
                                            outdir=str(tmp_path / lens), width=640,
                                            height=480, method="auto")).decision
     d = got["dgauss.50mm"]

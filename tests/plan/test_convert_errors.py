@@ -83,7 +83,7 @@ def test_a_failing_decision_stops_what_auto_started(tmp_path, monkeypatch, lens,
     monkeypatch.setattr(conv, "choose_method", failing_choice)
     out = tmp_path / "auto"
     with pytest.raises(PovlensError, match="decision failed"):
-        convert_and_render(ConvertOptions(scene=PAPER, lens=lens, focus=4.0, outdir=str(out),
+        convert_and_render(ConvertOptions.of(scene=PAPER, lens=lens, focus=4.0, outdir=str(out),
                                           width=48, height=36, method="auto"), quiet=True)
     assert started in seen[0]                                # it had started
     assert not list(out.glob(".probe.*")) and not list(out.glob(".speculative*"))

@@ -50,7 +50,7 @@ def _opts(tmp_path: Path, scene: str = SCENE, **kw) -> ConvertOptions:
                 outdir=str(tmp_path / "out"), width=80, height=60, method="mesh",
                 location=(0, 0, 0), look_at=(0, 0, 1))
     args.update(kw)
-    return ConvertOptions(**args)
+    return ConvertOptions.of(**args)
 
 
 def _ball_or_plane(dirs: np.ndarray) -> np.ndarray:
@@ -340,7 +340,7 @@ def test_auto_probe_gives_the_depth_map_of_the_former_separate_pinhole_conversio
     film = plan.film
     pw, ph = probe_size(film)
     old_dir = tmp_path / "old"
-    old = convert(dataclasses.replace(opts, outdir=str(old_dir), method="pinhole", samples=1,
+    old = convert(opts.replace(outdir=str(old_dir), method="pinhole", samples=1,
                                       width=pw, height=ph,
                                       film_size_mm=(film.width_mm, film.height_mm)))
     assert old.povray_camera == plan.povray_camera

@@ -20,7 +20,7 @@ from povlens.util.resources import SCENE_DIR
 def _opts(**kw):
     base = dict(scene=str(SCENE_DIR / "paper.pov"), lens="dgauss.50mm", focus=4.0,
                 outdir="unused", width=160, height=120, method="mesh", samples=8)
-    return ConvertOptions(**(base | kw))
+    return ConvertOptions.of(**(base | kw))
 
 
 def test_a_mesh_plan_records_its_certified_field_meshes_and_reads_back():

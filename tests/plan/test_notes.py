@@ -39,7 +39,7 @@ def plan_of(tmp_path, camera: str, body: str = BODY, **kw):
     base = dict(scene=scene(tmp_path, camera, body), lens="dgauss.50mm", focus=4.0,
                 outdir=str(tmp_path / "out"), width=32, height=24, method="pinhole")
     base.update(kw)
-    return make_plan(ConvertOptions(**base))
+    return make_plan(ConvertOptions.of(**base))
 
 
 def test_a_plain_perspective_camera_has_no_notes_and_plan_json_no_notes_key(tmp_path):
@@ -72,7 +72,7 @@ def test_another_camera_type_gives_its_pose_and_a_note(tmp_path, kind):
 def test_the_notes_round_trip_through_plan_json(tmp_path):
     from povlens.plan.schema import read_plan
     camera = "location <0, 1, -4> look_at <0, 1, 0> aperture 0.3 focal_point <0, 1, 0>"
-    plan = convert(ConvertOptions(scene=scene(tmp_path, camera), lens="dgauss.50mm",
+    plan = convert(ConvertOptions.of(scene=scene(tmp_path, camera), lens="dgauss.50mm",
                                   focus=None, outdir=str(tmp_path / "out"), width=32,
                                   height=24, method="pinhole"))
     saved = json.loads((tmp_path / "out" / "plan.json").read_text())
@@ -126,7 +126,7 @@ def test_the_pinhole_view_is_stretched_as_povrays_own_render(tmp_path):
     path = scene(tmp_path, "location <0, 0, -5> look_at <0, 0, 0> right 4/3*x up y angle 25",
                  body)
     own = povray_render(path, tmp_path / "own.exr", 96, 54)
-    plan = convert(ConvertOptions(scene=path, lens="dgauss.50mm", focus=5.0,
+    plan = convert(ConvertOptions.of(scene=path, lens="dgauss.50mm", focus=5.0,
                                   outdir=str(tmp_path / "out"), width=96, height=54,
                                   method="pinhole"))
     view = render_view(tmp_path / "out", "pinhole")
@@ -142,10 +142,10 @@ def test_the_scene_fog_is_noted_when_the_depth_probe_ran(tmp_path):
     camera = "location <0, 1, -4> look_at <0, 1, 0> right x*image_width/image_height"
     opts = dict(scene=scene(tmp_path, camera, body), lens="dgauss.50mm",
                 width=32, height=24, method="pinhole")
-    probed = convert(ConvertOptions(**opts, focus=None, focus_at=(16, 12),
+    probed = convert(ConvertOptions.of(**opts, focus=None, focus_at=(16, 12),
                                     outdir=str(tmp_path / "probed")))
     fog = [n for n in probed.notes if "fog" in n]
     assert len(fog) == 1 and "depth probe does not see it" in fog[0], probed.notes
     assert probed.depth_probe is not None
-    plain = convert(ConvertOptions(**opts, focus=4.0, outdir=str(tmp_path / "plain")))
+    plain = convert(ConvertOptions.of(**opts, focus=4.0, outdir=str(tmp_path / "plain")))
     assert scene_notes(plain) == []              # no probe ran: nothing was ignored

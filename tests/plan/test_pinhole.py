@@ -22,7 +22,7 @@ pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray 
 def _opts(tmp_path, name, **kw):
     base = dict(scene=PAPER, lens="dgauss.50mm", focus=4.0, outdir=str(tmp_path / name),
                 width=40, height=30)
-    return ConvertOptions(**(base | kw))
+    return ConvertOptions.of(**(base | kw))
 
 
 def test_a_pinhole_plan_builds_no_pupil_table_and_measures_no_model_error(tmp_path,

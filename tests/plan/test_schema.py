@@ -127,7 +127,7 @@ def test_a_new_plan_round_trips(tmp_path):
     for method, kw in (("pinhole", {}), ("mesh", {"samples": 3, "batch_size": 2,
                                                   "film_size_mm": (24.0, 18.0)})):
         out = tmp_path / method
-        plan = convert(ConvertOptions(scene=str(root / "scenes" / "paper.pov"),
+        plan = convert(ConvertOptions.of(scene=str(root / "scenes" / "paper.pov"),
                                       lens="tessar.50mm", focus=3, outdir=str(out), width=16,
                                       height=12, method=method, **kw))
         assert read_plan(out) == plan

@@ -63,7 +63,7 @@ _SETUPS = {}
 def setup_for(lens, width, height) -> Setup:
     key = (lens, width, height)
     if key not in _SETUPS:
-        o = ConvertOptions(scene=str(SCENE_DIR / "paper.pov"), lens=lens, focus=4.0,
+        o = ConvertOptions.of(scene=str(SCENE_DIR / "paper.pov"), lens=lens, focus=4.0,
                            outdir="unused", width=width, height=height, method="mesh")
         plan, stopped = make_plan_with_lens(o)
         table, _ = cached_pupil_table("unused/pupil.npz", stopped, plan.focus.film_distance_mm,

@@ -25,7 +25,7 @@ def opts(tmp_path, **kw):
     base = dict(scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=4.0,
                 outdir=str(tmp_path / "out"), width=48, height=36, samples=4, batch_size=2)
     base.update(kw)
-    return ConvertOptions(**base)
+    return ConvertOptions.of(**base)
 
 
 def povlens(*args, env=None, cwd=ROOT):

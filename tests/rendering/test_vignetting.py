@@ -28,7 +28,7 @@ def _render(tmp_path, name, **kw):
     base = dict(scene=SCENE, lens="dgauss.50mm", focus=4.0, width=64, height=48,
                 method="pinhole", outdir=str(tmp_path / name))
     base.update(kw)
-    convert(ConvertOptions(**base))
+    convert(ConvertOptions.of(**base))
     out = tmp_path / name
     render_outdir(out, quiet=True)
     return out
@@ -82,6 +82,6 @@ def test_focal_blur_view_gets_the_map_and_a_mesh_plan_does_not(tmp_path):
     ri = np.asarray(plan.vignetting_map["corner_relative_illumination"])
     np.testing.assert_allclose(image[0, 0], view[0, 0] * ri, rtol=2e-6, atol=1e-7)
     mesh = tmp_path / "mesh"
-    convert(ConvertOptions(scene=SCENE, lens="dgauss.50mm", focus=4.0, width=64, height=48,
+    convert(ConvertOptions.of(scene=SCENE, lens="dgauss.50mm", focus=4.0, width=64, height=48,
                            method="mesh", samples=2, outdir=str(mesh)))
     assert not wants_vignetting_map(read_plan(mesh))            # its composite weighs it

@@ -34,7 +34,7 @@ PLANE_SCENE = textwrap.dedent("""\
 def _plane_folder(tmp_path: Path, scene: str = PLANE_SCENE) -> Path:
     (tmp_path / "plane.pov").write_text(scene)
     out = tmp_path / "pl"
-    convert(ConvertOptions(scene=str(tmp_path / "plane.pov"), lens="dgauss.50mm", focus=5,
+    convert(ConvertOptions.of(scene=str(tmp_path / "plane.pov"), lens="dgauss.50mm", focus=5,
                            outdir=str(out), width=32, height=24, samples=1, method="pinhole",
                            location=(0, 0, 0), look_at=(0, 0, 1)))
     return out
@@ -110,7 +110,7 @@ def rendered(tmp_path_factory) -> Path:
     """A tiny mesh render of the paper scene (32x24, 2 lens samples)."""
     from povlens.rendering.driver import render_outdir
     out = tmp_path_factory.mktemp("report") / "paper"
-    convert(ConvertOptions(scene=str(ROOT / "scenes" / "paper.pov"), lens="dgauss.50mm",
+    convert(ConvertOptions.of(scene=str(ROOT / "scenes" / "paper.pov"), lens="dgauss.50mm",
                            focus=4, outdir=str(out), width=32, height=24, samples=2))
     render_outdir(out, jobs=2, quiet=True)
     return out
@@ -157,7 +157,7 @@ def test_report_is_self_contained_and_every_image_loads_in_chromium(rendered, tm
 
 def test_report_shows_missing_pieces_and_several_folders(rendered, tmp_path):
     bare = tmp_path / "bare"                 # converted, never rendered
-    convert(ConvertOptions(scene=str(ROOT / "scenes" / "paper.pov"), lens="dgauss.50mm",
+    convert(ConvertOptions.of(scene=str(ROOT / "scenes" / "paper.pov"), lens="dgauss.50mm",
                            focus=4, outdir=str(bare), width=32, height=24, samples=2))
     page = tmp_path / "r.html"
     make_report([bare, rendered], page, render_missing=False)
