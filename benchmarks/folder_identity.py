@@ -69,8 +69,8 @@ def _text(data: bytes, folder: pathlib.Path, here: pathlib.Path) -> bytes:
     """``data`` without the folder's and the tree's paths (absolute, or relative to
     ``here``, the file's folder: a wrapper's ``#include``) and without timings
     (``"seconds": ...``, ``"build_time_s": ...``)."""
+    data = data.replace(os.path.relpath(HERE, here).encode(), b"<TREE>")   # first: it holds HERE
     data = data.replace(str(folder).encode(), b"<OUT>").replace(str(HERE).encode(), b"<TREE>")
-    data = data.replace(os.path.relpath(HERE, here).encode(), b"<TREE>")
     return re.sub(rb'"(seconds|\w+_time_s)": [0-9.e+-]+', rb'"\1": 0', data)
 
 
