@@ -152,7 +152,7 @@ def run_auto_bench(s: AutoBenchSettings, log=print) -> tuple[list[AutoRow], str]
                 tag = f"{scene}-{lens}"
 
                 def opts(name, **kw):
-                    base = dict(scene=str(scene_path), lens=lens, focus=focus,
+                    base = dict(method="mesh", scene=str(scene_path), lens=lens, focus=focus,
                                 width=s.width, height=s.height, outdir=str(tmp / tag / name))
                     base.update(kw)
                     return ConvertOptions.of(**base)

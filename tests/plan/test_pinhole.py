@@ -20,7 +20,7 @@ pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray 
 
 
 def _opts(tmp_path, name, **kw):
-    base = dict(scene=PAPER, lens="dgauss.50mm", focus=4.0, outdir=str(tmp_path / name),
+    base = dict(method="mesh", scene=PAPER, lens="dgauss.50mm", focus=4.0, outdir=str(tmp_path / name),
                 width=40, height=30)
     return ConvertOptions.of(**(base | kw))
 

@@ -22,7 +22,7 @@ pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray 
 
 
 def opts(tmp_path, **kw):
-    base = dict(scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=4.0,
+    base = dict(method="mesh", scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=4.0,
                 outdir=str(tmp_path / "out"), width=48, height=36, samples=4, batch_size=2)
     base.update(kw)
     return ConvertOptions.of(**base)

@@ -111,7 +111,7 @@ def rendered(tmp_path_factory) -> Path:
     from povlens.rendering.driver import render_outdir
     out = tmp_path_factory.mktemp("report") / "paper"
     convert(ConvertOptions.of(scene=str(ROOT / "scenes" / "paper.pov"), lens="dgauss.50mm",
-                           focus=4, outdir=str(out), width=32, height=24, samples=2))
+                           focus=4, outdir=str(out), width=32, height=24, samples=2, method="mesh"))
     render_outdir(out, jobs=2, quiet=True)
     return out
 
@@ -158,7 +158,7 @@ def test_report_is_self_contained_and_every_image_loads_in_chromium(rendered, tm
 def test_report_shows_missing_pieces_and_several_folders(rendered, tmp_path):
     bare = tmp_path / "bare"                 # converted, never rendered
     convert(ConvertOptions.of(scene=str(ROOT / "scenes" / "paper.pov"), lens="dgauss.50mm",
-                           focus=4, outdir=str(bare), width=32, height=24, samples=2))
+                           focus=4, outdir=str(bare), width=32, height=24, samples=2, method="mesh"))
     page = tmp_path / "r.html"
     make_report([bare, rendered], page, render_missing=False)
     text = page.read_text()
