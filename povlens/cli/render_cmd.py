@@ -30,11 +30,11 @@ def focus_frames(args) -> list[float] | None:
     if args.focus_at is not None and frames is not None:
         raise UsageError(f"--focus-at focuses one frame: a focus pull is --focus A:B "
                          f"--frames {frames} (or --focus D1,D2,...)")
-    values = api.focus_distances(args.focus, frames)
-    if values is not None and not hasattr(args, "frames"):
+    if not hasattr(args, "frames") and args.focus is not None and any(
+            sep in args.focus for sep in ":,"):      # A:B or D1,D2,...
         raise UsageError(f"--focus {args.focus} is a focus pull: 'povlens {args.command}' "
                          f"takes one distance (pulls: 'povlens render --frames')")
-    return values
+    return api.focus_distances(args.focus, frames)
 
 
 def convert_keywords(args) -> dict:

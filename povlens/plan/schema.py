@@ -29,8 +29,8 @@ from povlens.errors import PovlensError
 from povlens.lens.film import Film
 from povlens.plan.render_folder import PLAN_FILE
 from povlens.thinlens.model import EquivalentThinLens
-from povlens.util.files import write_text
 from povlens.thinlens.model_error import ModelError
+from povlens.util.files import write_text
 
 __all__ = ["SCHEMA_VERSION", "PLAN_FILE", "Inputs", "LensSummary", "FocusSolution",
            "CameraPlacement", "PovrayCamera", "PovraySettings", "FocalBlurSettings",

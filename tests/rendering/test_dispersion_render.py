@@ -259,7 +259,7 @@ def test_auto_picks_mesh_when_the_colour_is_visible(files):
                           focus=4.0, outdir=str(out), method="auto", dispersion=True)
     view = Decision("focal-blur", 32, ["-> focal-blur: within the budget"])
     chosen = colour_decision(opts, lens, plan, view)
-    assert (chosen.sampling.method, chosen.sampling.sample_count) == ("mesh", 16)
+    assert (chosen.method, chosen.samples) == ("mesh", 16)
     assert chosen.reasons[-1].startswith("-> mesh: --dispersion")
     kept = colour_decision(opts.replace(tolerance_px=1e3), lens, plan, view)
     assert kept.method == "focal-blur" and "within the tolerance" in kept.reasons[-2]

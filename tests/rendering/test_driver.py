@@ -130,7 +130,7 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, l
     from povlens.rendering.driver import convert_and_render
     auto = tmp_path / "auto"
     kw = dict(lens=lens, focus=focus, film_diagonal_mm=film_mm, batch_size=None)
-    plan, _ = convert_and_render(opts(tmp_path, outdir=str(auto), method="auto",
+    plan, _ = convert_and_render(opts(tmp_path, outdir=str(auto), method="auto", samples=None,
                                       tolerance_px=tol, **kw), quiet=True)
     assert plan.inputs.method == "mesh" and not plan.decision.provisional
     assert any("while the depth probe ran" in r for r in plan.decision.reasons)
@@ -157,7 +157,7 @@ def test_a_wrong_guess_stops_the_early_samples_and_renders_the_decision(tmp_path
     from povlens.rendering.driver import convert_and_render
     monkeypatch.setattr(speculative, "lens_rules_out_views", lambda opts, plan0: True)
     out = tmp_path / "auto"
-    plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto",
+    plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto", samples=None,
                                           lens="telephoto.250mm", batch_size=None), quiet=True)
     assert plan.inputs.method == "focal-blur"
     assert any("mesh render started while the probe ran was stopped" in r
@@ -179,7 +179,7 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
     from povlens.rendering.driver import convert_and_render
     monkeypatch.setattr(speculative, "early_guess", lambda opts, plan0: "either")
     out = tmp_path / "auto"
-    plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto", lens=lens,
+    plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto", samples=None, lens=lens,
                                           batch_size=None), quiet=True)
     assert plan.inputs.method == decided
     reasons = " ".join(plan.decision.reasons)
@@ -192,7 +192,7 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
         # plan, written at the same time, must not change the wrapper it renders)
         from povlens.rendering.views import render_view
         plain = tmp_path / "plain"
-        convert(opts(tmp_path, outdir=str(plain), method="auto", lens=lens, batch_size=None))
+        convert(opts(tmp_path, outdir=str(plain), method="auto", samples=None, lens=lens, batch_size=None))
         render_view(plain, "focal-blur")
         few = tmp_path / "few"
         convert(opts(tmp_path, outdir=str(few), method="focal-blur", lens=lens, samples=8))
