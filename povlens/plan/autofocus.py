@@ -42,7 +42,7 @@ from povlens.errors import ParameterError
 from povlens.lens.film import Film
 from povlens.lens.focus import UNITS_MM
 from povlens.plan.depth_probe import ProbeView, ray_directions, start_probe
-from povlens.plan.fixed import PlanStart, camera_focus, start_plan
+from povlens.plan.plan_finish import PlanStart, camera_focus, start_plan
 from povlens.plan.options import ConvertOptions
 from povlens.plan.schema import PovrayCamera
 
@@ -122,7 +122,7 @@ def pixel_shift_px(a: PovrayCamera, b: PovrayCamera, film: Film, x: float, y: fl
     v = _pixel_direction(b, film, x, y)
     D, R, U = (np.asarray(t, dtype=np.float64) for t in (a.direction, a.right, a.up))
     # v = s (D + u R + w U): solve in a's image plane, whose normal is R x U (D is
-    # tilted off it by a lens shift, plan.fixed.off_axis_direction)
+    # tilted off it by a lens shift, plan.plan_finish.off_axis_direction)
     n = np.cross(R, U)
     s = (n @ D) / (n @ v)
     p = s * v - D

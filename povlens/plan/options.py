@@ -513,7 +513,7 @@ def dask_options() -> Iterator[tuple[dataclasses.Field, OptionSpec]]:
 
 def stored_values(opts: ConvertOptions) -> dict:
     """The options the plan's ``inputs`` keep as given (those declared ``stored``);
-    the others are kept as the conversion resolved them (:mod:`povlens.plan.fixed`)."""
+    the others are kept as the conversion resolved them (:mod:`povlens.plan.plan_finish`)."""
     return {f.name: opts.value(f.name) for _, f, spec in options() if spec.stored}
 
 

@@ -140,7 +140,7 @@ def test_adaptive_bands_use_the_real_spot_where_it_is_larger_than_the_thin_lens_
     spherical aberration makes a spot of many pixels, so every band needs more
     than the floor (before: every band 8 where the decision wanted 256)."""
     from povlens.plan.adaptive import adaptive_rows, real_blur_at, real_blur_model_error
-    from povlens.plan.fixed import make_plan_with_lens
+    from povlens.plan.plan_finish import make_plan_with_lens
     o = ConvertOptions.of(scene=str(SCENES / "paper.pov"), lens="singlet.pcx.25mm", focus=2.0,
                        outdir="unused", width=48, height=36, method="mesh", samples=256)
     plan, lens = make_plan_with_lens(o)

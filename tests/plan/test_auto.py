@@ -10,7 +10,7 @@ import pytest
 
 from povlens.plan.convert import ConvertOptions
 from povlens.plan.decision import MAX_SAMPLES, MIN_SAMPLES, decide, model_depths
-from povlens.plan.fixed import make_plan_with_lens
+from povlens.plan.plan_finish import make_plan_with_lens
 from povlens.thinlens.model_error import measure_model_error
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
@@ -312,7 +312,7 @@ def test_a_catseye_that_takes_most_of_the_budget_prefers_a_minimum_mesh():
 def test_early_guess_of_the_bundled_lenses(lens, guess):
     """At 160x120 and 4 m: dgauss.50mm distorts by 0.52 px and the fisheye by 13 px
     at the standard depths (mesh); the others' vignetting is applied as a map."""
-    from povlens.plan.fixed import make_plan
+    from povlens.plan.plan_finish import make_plan
     from povlens.plan.speculative import early_guess
     opts = ConvertOptions.of(scene=PAPER, lens=lens, focus=4.0, outdir="unused",
                           method="focal-blur", width=160, height=120)

@@ -12,7 +12,7 @@ import pytest
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.decision import catseye_px, pupil_cut
 from povlens.plan.image_error import catseye_rmse, shift_rmse
-from povlens.plan.fixed import make_plan_with_lens
+from povlens.plan.plan_finish import make_plan_with_lens
 from povlens.pupil.illumination import illumination_profile
 from povlens.pupil.storage import cached_pupil_table
 from povlens.thinlens.model_error import ModelError

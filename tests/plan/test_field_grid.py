@@ -11,7 +11,7 @@ import pytest
 
 from povlens.errors import ParameterError
 from povlens.plan.field_grid import LIMIT_PX, certification_pupil_points, pixel_subset
-from povlens.plan.fixed import make_plan_with_lens
+from povlens.plan.plan_finish import make_plan_with_lens
 from povlens.plan.options import ConvertOptions
 from povlens.plan.schema import Plan
 from povlens.util.resources import SCENE_DIR
@@ -63,7 +63,7 @@ def test_a_lens_no_grid_holds_falls_back_to_pixel_meshes_with_a_note():
 
 
 def test_an_unmeasured_povray_version_falls_back_to_pixel_meshes():
-    from povlens.plan.fixed import PlanReuse, finish_plan, start_plan
+    from povlens.plan.plan_finish import PlanReuse, finish_plan, start_plan
     o = _opts()
     plan, _ = finish_plan(o, start_plan(o), PlanReuse(version=lambda: "3.8.0-beta.2"))
     assert plan.field_mesh is None and plan.inputs.ray_mesh == "pixel"

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from povlens.plan.convert import ConvertOptions, convert
-from povlens.plan.fixed import PINHOLE_NOTE, make_plan
+from povlens.plan.plan_finish import PINHOLE_NOTE, make_plan
 from povlens.pov.process import render as povray_render
 from povlens.rendering.views import render_view
 from povlens.util.images import read_image

@@ -8,9 +8,9 @@ import shutil
 
 import pytest
 
-import povlens.plan.fixed as fixed
+import povlens.plan.plan_finish as plan_finish
 from povlens.plan.convert import ConvertOptions, convert
-from povlens.plan.fixed import PINHOLE_NOTE
+from povlens.plan.plan_finish import PINHOLE_NOTE
 from povlens.plan.schema import read_plan
 
 from conftest import ROOT
@@ -30,8 +30,8 @@ def test_a_pinhole_plan_builds_no_pupil_table_and_measures_no_model_error(tmp_pa
     def not_wanted(*args, **kw):
         raise AssertionError("a pinhole plan needs no pupil table or model error")
     with monkeypatch.context() as m:
-        m.setattr(fixed, "cached_pupil_table", not_wanted)
-        m.setattr(fixed, "measure_model_error", not_wanted)
+        m.setattr(plan_finish, "cached_pupil_table", not_wanted)
+        m.setattr(plan_finish, "measure_model_error", not_wanted)
         pin = convert(_opts(tmp_path, "pin", method="pinhole"))
     out = tmp_path / "pin"
     assert not (out / "pupil.npz").exists()

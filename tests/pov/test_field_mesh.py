@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from povlens.plan.field_grid import choose_field_mesh
-from povlens.plan.fixed import make_plan_with_lens
+from povlens.plan.plan_finish import make_plan_with_lens
 from povlens.plan.options import ConvertOptions
 from povlens.pov import process as povray
 from povlens.pov.field_emulation import emulate, ray_error_px
