@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from povlens.lens.focus import FocusResult, UNITS_MM, focus as focus_mm
+from povlens.lens.focus import LENS_SIDE_UNITS, UNITS_MM, FocusResult, focus as focus_mm
 from povlens.lens.prescription import LensPrescription, read_lens as read_lens_file
 from povlens.errors import ParameterError
 from povlens.plan.convert import convert as convert_options
@@ -57,7 +57,7 @@ def _as_lens(lens: LensPrescription | str | os.PathLike) -> LensPrescription:
 
 
 def focus(lens: LensPrescription | str | os.PathLike, distance: float,
-          units: str = "mm") -> FocusResult:
+          units: str = LENS_SIDE_UNITS) -> FocusResult:
     """Focus ``lens`` on an object ``distance`` from the film.
 
     Parameters
@@ -342,13 +342,14 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
     return FramesResult.of(outdir, records)
 
 
-def render_batch(outdir: str | os.PathLike, batch: int, in_flight: int = 4) -> None:
+def render_batch(outdir: str | os.PathLike, batch: int, in_flight: int | None = None) -> None:
     """Render batch ``batch`` of a converted folder's lens samples (what ``make`` runs).
 
-    ``in_flight``: POV-Ray processes running at once (each spends most of its ~0.6 s
-    start-up idle, so several overlap on one core)."""
-    from povlens.rendering.mesh_samples import render_batch as render_folder_batch
-    render_folder_batch(outdir, batch, in_flight=in_flight)
+    ``in_flight``: POV-Ray processes running at once (default
+    :data:`povlens.rendering.mesh_samples.POVRAY_IN_FLIGHT`: each spends most of its
+    ~0.6 s start-up idle, so several overlap on one core)."""
+    from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, render_batch as render_folder_batch
+    render_folder_batch(outdir, batch, in_flight=in_flight or POVRAY_IN_FLIGHT)
 
 
 def render_view(outdir: str | os.PathLike, view: str) -> Path:

@@ -6,7 +6,7 @@ import math
 
 from povlens.lens.check import check_lens
 from povlens.lens.film import DEFAULT_FILM_DIAGONAL_MM
-from povlens.lens.focus import thick_lens_film_distance_mm, to_mm
+from povlens.lens.focus import LENS_SIDE_UNITS, UNITS_MM, thick_lens_film_distance_mm, to_mm
 from povlens.cli.common import add_lens_command, distance, load_lens, positive_float, print_json
 
 
@@ -24,7 +24,7 @@ def register(sub) -> None:
                    help="rear vertex to film, mm (default: focused by --focus)")
     p.add_argument("--focus", type=distance, default=math.inf, metavar="D",
                    help="object distance from the film in --units (default inf)")
-    p.add_argument("--units", default="mm", choices=["mm", "cm", "m", "in"])
+    p.add_argument("--units", default=LENS_SIDE_UNITS, choices=sorted(UNITS_MM))
     p.add_argument("--film-diagonal", type=positive_float, default=DEFAULT_FILM_DIAGONAL_MM,
                    metavar="MM", help="film diagonal in mm (default %(default)g)")
     p.add_argument("--json", action="store_true", help="print JSON")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from povlens.lens.focus import UNITS_MM, focus, to_mm
+from povlens.lens.focus import LENS_SIDE_UNITS, UNITS_MM, focus, to_mm
 from povlens.cli.common import add_lens_command, distance, load_lens, print_json
 
 
@@ -19,8 +19,8 @@ def register(sub) -> None:
                     "lens).")
     p.add_argument("--distance", "-d", type=distance, required=True, metavar="D",
                    help="object distance from the film plane ('inf' for infinity)")
-    p.add_argument("--units", choices=sorted(UNITS_MM), default="mm",
-                   help="units of --distance (default mm)")
+    p.add_argument("--units", choices=sorted(UNITS_MM), default=LENS_SIDE_UNITS,
+                   help="units of --distance (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print JSON")
 
 

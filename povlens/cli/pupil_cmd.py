@@ -14,18 +14,20 @@ import numpy as np
 
 from povlens.errors import UsageError
 from povlens.lens.film import DEFAULT_FILM_DIAGONAL_MM, parse_film_size
-from povlens.lens.focus import UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_mm
+from povlens.lens.focus import LENS_SIDE_UNITS, UNITS_MM, exact_film_distance_mm, thick_lens_film_distance_mm
 from povlens.lens.paraxial import ParaxialData, paraxial_data
 from povlens.lens.prescription import LensPrescription
 from povlens.pupil.baselines import (PBRT_INTERVALS, PBRT_RAYS_PER_INTERVAL, NaiveRearElement,
-                                     PbrtBoxes)
-from povlens.pupil.build import DEFAULT_TOLERANCE
+                                     PassComparison, PbrtBoxes)
+from povlens.pupil.build import DEFAULT_TOLERANCE, PLANES
 from povlens.pupil.plot import plot_pupil_shapes
 from povlens.pupil.storage import cached_pupil_table
 from povlens.pupil.table import PupilTable
 from povlens.cli.common import (add_lens_arguments, load_lens, positive_float, positive_int,
                                 print_json)
 
+
+COMPARISON = PassComparison()     # the comparison's defaults
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -39,10 +41,10 @@ def register(sub) -> None:
                     "whole rear element, and the build time of each.")
     add_lens_arguments(p)
     p.add_argument("--focus", required=True, metavar="D",
-                   help="object distance from the film plane, in --units (default mm) or with "
+                   help="object distance from the film plane, in --units (default %(default)s) or with "
                         "a unit suffix (10m, 250cm, 5in); 'inf' for infinity")
-    p.add_argument("--units", choices=sorted(UNITS_MM), default="mm",
-                   help="units of --focus without a suffix (default mm)")
+    p.add_argument("--units", choices=sorted(UNITS_MM), default=LENS_SIDE_UNITS,
+                   help="units of --focus without a suffix (default %(default)s)")
     p.add_argument("--exact-focus", action="store_true",
                    help="place the film by the real-ray focus instead of the thick-lens "
                         "equation (pbrt's method, the default)")
@@ -53,17 +55,20 @@ def register(sub) -> None:
     p.add_argument("--tolerance", type=positive_float, default=DEFAULT_TOLERANCE, metavar="T",
                    help=f"relative area error of the table's region description "
                         f"(default {DEFAULT_TOLERANCE})")
-    p.add_argument("--plane", choices=["exit-pupil", "rear-vertex"], default="exit-pupil",
-                   help="sampling plane of the table (default exit-pupil)")
-    p.add_argument("--bands", type=positive_int, default=8, metavar="N",
-                   help="film-radius bands in the comparison (default 8)")
-    p.add_argument("--radii-per-band", type=positive_int, default=4, metavar="N",
-                   help="film radii measured in each band (default 4)")
-    p.add_argument("--samples", type=positive_int, default=1024, metavar="N",
-                   help="Sobol samples per film radius for the pass fractions (default 1024)")
-    p.add_argument("--pbrt-rays", type=positive_int, default=1 << 14, metavar="N",
-                   help="rays per interval for the pbrt-style boxes (default 16384; pbrt "
-                        "uses 1048576 -- its build time is then estimated)")
+    p.add_argument("--plane", choices=PLANES, default=PLANES[0],
+                   help="sampling plane of the table (default %(default)s)")
+    p.add_argument("--bands", type=positive_int, default=COMPARISON.bands, metavar="N",
+                   help="film-radius bands in the comparison (default %(default)s)")
+    p.add_argument("--radii-per-band", type=positive_int, default=COMPARISON.radii_per_band,
+                   metavar="N", help="film radii measured in each band (default %(default)s)")
+    p.add_argument("--samples", type=positive_int, default=COMPARISON.samples_per_radius,
+                   metavar="N", help="Sobol samples per film radius for the pass fractions "
+                                     "(default %(default)s)")
+    p.add_argument("--pbrt-rays", type=positive_int,
+                   default=COMPARISON.pbrt_rays_per_interval, metavar="N",
+                   help=f"rays per interval for the pbrt-style boxes (default %(default)s; "
+                        f"pbrt uses {PBRT_RAYS_PER_INTERVAL} -- its build time is then "
+                        f"estimated)")
     p.add_argument("--no-compare", action="store_true",
                    help="build (or reuse) the table only; no pbrt or naive comparison")
     p.add_argument("-o", "--output", metavar="TABLE.npz",
@@ -71,7 +76,8 @@ def register(sub) -> None:
     p.add_argument("--plot", metavar="PNG", help="draw the pupil shape at several film radii")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
-    p.add_argument("--seed", type=int, default=0, help="seed of the scrambled Sobol points")
+    p.add_argument("--seed", type=int, default=COMPARISON.seed,
+                   help="seed of the scrambled Sobol points (default %(default)s)")
     p.set_defaults(func=run)
 
 

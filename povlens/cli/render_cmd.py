@@ -174,9 +174,10 @@ def register(sub) -> None:
     p = sub.add_parser("render-batch", help="render one batch of lens samples (used by make)")
     p.add_argument("outdir", metavar="OUTDIR")
     p.add_argument("batch", type=int, metavar="BATCH")
-    p.add_argument("--in-flight", type=int, default=4, metavar="N",
-                   help="POV-Ray processes running at once (default 4: each spends most of "
-                        "its ~0.6 s start-up idle, so several overlap on one core)")
+    p.add_argument("--in-flight", type=int, metavar="N",
+                   help="POV-Ray processes running at once (default: several, as 'render' "
+                        "runs per core: each spends most of its ~0.6 s start-up idle, so "
+                        "several overlap on one core)")
     p.set_defaults(func=run_batch)
 
     p = sub.add_parser("render-view", help="render the pinhole or focal-blur view (used by make)")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from povlens.errors import UsageError
+from povlens.report import DEFAULT_REPORT
 
 
 def register(sub) -> None:
@@ -15,8 +16,8 @@ def register(sub) -> None:
                     "errors and times against the exact mesh render, and what the thin-lens "
                     "model gets wrong.  Missing renders are shown as 'not rendered'.")
     p.add_argument("outdirs", metavar="OUTDIR", nargs="+", help="render folder(s)")
-    p.add_argument("-o", "--output", metavar="HTML", default="report.html",
-                   help="the page to write (default: report.html)")
+    p.add_argument("-o", "--output", metavar="HTML", default=DEFAULT_REPORT,
+                   help="the page to write (default: %(default)s)")
     p.add_argument("--no-render", action="store_true",
                    help="never run POV-Ray: no missing pinhole/focal-blur views, no depth probe")
     p.set_defaults(func=run)

@@ -28,9 +28,12 @@ from povlens.lens.tracer import trace_from_scene
 from povlens.util.minimize import bounded_minimum  # scipy's, without its 0.5 s import
 
 __all__ = ["FocusResult", "thick_lens_film_distance_mm", "closest_focus_distance_mm",
-           "exact_film_distance_mm", "focus", "UNITS_MM", "to_mm"]
+           "exact_film_distance_mm", "focus", "UNITS_MM", "LENS_SIDE_UNITS", "to_mm"]
 
 UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+#: The unit of an object distance on the lens side (``povlens focus``, ``pupil``,
+#: ``check``, :func:`povlens.api.focus`) when none is named: a lens barrel's mm.
+LENS_SIDE_UNITS = "mm"
 
 
 def to_mm(value: float, units: str) -> float:

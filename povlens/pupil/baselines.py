@@ -33,6 +33,7 @@ every ray that passes.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -46,10 +47,26 @@ from povlens.pupil.sampler_interface import (LensSample, SamplerMeasurements,
 from povlens.lens.tracer import trace_from_film
 
 __all__ = ["PbrtBoxes", "NaiveRearElement", "radical_inverse", "PBRT_INTERVALS",
-           "PBRT_RAYS_PER_INTERVAL"]
+           "PBRT_RAYS_PER_INTERVAL", "PassComparison"]
 
 PBRT_INTERVALS = 64
 PBRT_RAYS_PER_INTERVAL = 1 << 20
+
+
+@dataclasses.dataclass(frozen=True)
+class PassComparison:
+    """How ``povlens pupil`` compares the pass fractions of povlens's table, pbrt's
+    boxes and the naive rear element: film-radius ``bands``, ``radii_per_band`` radii
+    measured in each, ``samples_per_radius`` scrambled-Sobol samples (seed ``seed``)
+    per radius, and ``pbrt_rays_per_interval`` rays per interval for the boxes (pbrt
+    uses :data:`PBRT_RAYS_PER_INTERVAL`; fewer keep the comparison quick, and pbrt's
+    build time is then estimated)."""
+
+    bands: int = 8
+    radii_per_band: int = 4
+    samples_per_radius: int = 1024
+    pbrt_rays_per_interval: int = 1 << 14
+    seed: int = 0
 
 
 def radical_inverse(i: np.ndarray, base: int) -> np.ndarray:

@@ -98,7 +98,7 @@ from povlens.lens.prescription import LensPrescription
 from povlens.pupil.prober import PupilProber, grow_boxes
 from povlens.pupil.table import PupilTable
 
-__all__ = ["build_pupil_table", "sampling_plane_z_mm", "DEFAULT_TOLERANCE", "SAFETY_MARGIN",
+__all__ = ["build_pupil_table", "sampling_plane_z_mm", "PLANES", "DEFAULT_TOLERANCE", "SAFETY_MARGIN",
            "RENORMALISE", "MAX_KNOTS", "MIN_STOP_FRACTION"]
 
 #: Default relative area tolerance of the region description (module docstring).
@@ -112,10 +112,12 @@ RENORMALISE = 0.002
 MAX_KNOTS = 128
 #: Smallest stop diameter, as a fraction of the focal length, a table is built for.
 MIN_STOP_FRACTION = 1e-4
+#: The planes a table can be sampled on, the default first.
+PLANES = ("exit-pupil", "rear-vertex")
 
 
 def sampling_plane_z_mm(lens: LensPrescription, film_distance_mm: float,
-                        plane: str = "exit-pupil") -> tuple[float, str]:
+                        plane: str = PLANES[0]) -> tuple[float, str]:
     """z of the sampling plane (camera frame, mm) and the plane actually used.
 
     Parameters
@@ -143,7 +145,7 @@ def sampling_plane_z_mm(lens: LensPrescription, film_distance_mm: float,
 
 def build_pupil_table(lens: LensPrescription, film_distance_mm: float,
                       film_half_diagonal_mm: float, *, tolerance: float = DEFAULT_TOLERANCE,
-                      plane: str = "exit-pupil", n_angles: int | None = None,
+                      plane: str = PLANES[0], n_angles: int | None = None,
                       safety_margin: float = SAFETY_MARGIN, initial_knots: int = 5,
                       min_interval_mm: float | None = None, progress=None,
                       metadata: dict | None = None) -> PupilTable:

@@ -44,6 +44,7 @@ from povlens.lens.tracer import trace_from_film
 from povlens.plan.depth_probe import axial_depth, probe_depth
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, read_plan
+from povlens.report import DEFAULT_REPORT
 from povlens.pupil.plot import plot_pupil_shapes
 from povlens.pupil.storage import cached_pupil_table
 from povlens.rendering.folder_composite import composite_outdir
@@ -597,7 +598,7 @@ window.addEventListener('load', function () {
 """
 
 
-def make_report(outdirs, output, render_missing: bool = True) -> Path:
+def make_report(outdirs, output=DEFAULT_REPORT, render_missing: bool = True) -> Path:
     """Write the HTML report of the render folders ``outdirs`` to ``output`` (atomically).
 
     ``render_missing`` lets the report run POV-Ray for what it needs and the folder
