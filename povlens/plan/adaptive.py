@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
+from povlens.plan.batches import round_robin_batches
 from povlens.plan.decision import MIN_SAMPLES, model_depths, samples_for_blur
 from povlens.plan.depth_probe import depth_limits
-from povlens.plan.plan_finish import round_robin_batches
 from povlens.plan.schema import AdaptiveSampling, Plan
 from povlens.thinlens.model_error import ModelError, measure_model_error
 
@@ -133,7 +133,7 @@ def apply_to_plan(plan: Plan, adaptive: AdaptiveSampling, batch_size: int | None
 
     Every sample is its own POV-Ray process (:func:`povlens.rendering.mesh_samples.render_samples`),
     so a batch may mix row ranges; samples are dealt round-robin
-    (:func:`~povlens.plan.plan_finish.round_robin_batches`: later samples render fewer
+    (:func:`~povlens.plan.batches.round_robin_batches`: later samples render fewer
     rows, so contiguous batches would be unequal)."""
     h, w = plan.film.height_px, plan.film.width_px
     rows = sample_row_ranges(adaptive, h)

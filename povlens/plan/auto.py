@@ -34,14 +34,15 @@ from povlens.plan.adaptive import adaptive_rows
 from povlens.plan.aperture import AUTO_NOTE, PINHOLE_NOTE, describe
 from povlens.plan.decision import decide, model_depths, pupil_cut, shift_tilt_cos
 from povlens.plan.depth_probe import DepthProbe, ProbeView, axial_depth, depth_limits, start_probe
-from povlens.plan.plan_finish import run_in_background, start_plan
 from povlens.plan.image_error import probe_image_error
 from povlens.plan.options import povray_options_of
+from povlens.plan.plan_start import start_plan
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pupil.illumination import illumination_profile, profile_record
 from povlens.pupil.storage import cached_pupil_table
 from povlens.thinlens.model_error import measure_model_error
+from povlens.util.threads import run_in_background
 
 __all__ = ["PROBE_WIDTH", "probe_size", "start_depth_probe", "probe_axial_mm",
            "measure_depth_map", "measure_depth_range", "choose_method"]
@@ -62,7 +63,7 @@ def start_depth_probe(opts, film: Film, plan, threads: int = 1) -> DepthProbe:
     """Start the small pinhole depth probe of ``opts`` (:func:`probe_size` pixels).
 
     ``plan`` is a :class:`~povlens.plan.schema.Plan` of ``opts`` (any method) or
-    the :class:`~povlens.plan.plan_finish.PlanStart` of one: its ``povray_camera`` is
+    the :class:`~povlens.plan.plan_start.PlanStart` of one: its ``povray_camera`` is
     the probe's, since the probe's film is the same in mm; only the pixels
     differ.  Every render gets the user's POV-Ray options (``opts.povray.library_paths``,
     ``clock``, ``povray_options``).  Besides the three depth renders, the view as it

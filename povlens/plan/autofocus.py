@@ -42,8 +42,9 @@ from povlens.errors import ParameterError
 from povlens.lens.film import Film
 from povlens.lens.focus import UNITS_MM
 from povlens.plan.depth_probe import ProbeView, ray_directions, start_probe
-from povlens.plan.plan_finish import PlanStart, camera_focus, start_plan
+from povlens.plan.camera_setup import camera_focus
 from povlens.plan.options import ConvertOptions
+from povlens.plan.plan_start import PlanStart, start_plan
 from povlens.plan.schema import PovrayCamera
 
 __all__ = ["WINDOW", "SAME_SURFACE", "SHIFT_PX", "MAX_ROUNDS", "FADE_RANGE", "resolve_focus",
@@ -122,7 +123,7 @@ def pixel_shift_px(a: PovrayCamera, b: PovrayCamera, film: Film, x: float, y: fl
     v = _pixel_direction(b, film, x, y)
     D, R, U = (np.asarray(t, dtype=np.float64) for t in (a.direction, a.right, a.up))
     # v = s (D + u R + w U): solve in a's image plane, whose normal is R x U (D is
-    # tilted off it by a lens shift, plan.plan_finish.off_axis_direction)
+    # tilted off it by a lens shift, plan.camera_setup.off_axis_direction)
     n = np.cross(R, U)
     s = (n @ D) / (n @ v)
     p = s * v - D

@@ -2,8 +2,9 @@
 
 ``convert`` never edits the user's scene.  It resolves the focus distance
 (:mod:`povlens.plan.autofocus`: the option, the scene camera's, or measured by the
-depth probe), derives the plan (:mod:`povlens.plan.plan_finish`; with ``--method auto``
-after measuring the scene and deciding, :mod:`povlens.plan.auto`) and writes OUTDIR
+depth probe), derives the plan (:mod:`povlens.plan.plan_start`,
+:mod:`povlens.plan.plan_finish`; with ``--method auto`` after measuring the scene and
+deciding, :mod:`povlens.plan.auto`) and writes OUTDIR
 (:mod:`povlens.plan.folder_writer`): ``plan.json``, the POV-Ray wrappers, the
 exit-pupil table ``pupil.npz`` and a ``Makefile`` (``make -C OUTDIR -j2``
 renders and composites).
@@ -23,14 +24,15 @@ from povlens.plan.auto import choose_method, measure_depth_map, start_depth_prob
 from povlens.plan.autofocus import pinhole_focus_note, resolve_focus
 from povlens.plan.depth_probe import atmosphere_note, depth_limits, probe_record
 from povlens.plan.dispersion_plan import colour_decision
-from povlens.plan.plan_finish import (PlanReuse, PlanStart, finish_plan, make_plan,
-                                make_plan_with_lens, run_in_background, start_plan)
+from povlens.plan.plan_finish import PlanReuse, finish_plan, make_plan, make_plan_with_lens
+from povlens.plan.plan_start import PlanStart, start_plan
 from povlens.plan.options import METHODS, ConvertOptions, with_povray_options_checked
 from povlens.plan.folder_writer import write_folder
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pov.executable import povray_version
 from povlens.util.resources import resolve_scene_path
+from povlens.util.threads import run_in_background
 
 __all__ = ["ConvertOptions", "METHODS", "convert", "make_plan"]
 

@@ -609,7 +609,7 @@ def _conclusion(c: DecisionChecks, verdict: Verdict) -> str:
 def shift_tilt_cos(shift_mm, image_distance_mm: float) -> float:
     """cos of the tilt of POV-Ray's ``direction`` for a film shifted by ``shift_mm``
     (x, y mm on the image plane) behind a thin lens of image distance
-    ``image_distance_mm`` (:func:`povlens.plan.plan_finish.off_axis_direction`); 1 unshifted."""
+    ``image_distance_mm`` (:func:`povlens.plan.camera_setup.off_axis_direction`); 1 unshifted."""
     sx, sy = (float(v) for v in shift_mm)
     v = abs(float(image_distance_mm))
     return v / math.sqrt(v * v + sx * sx + sy * sy) if (sx or sy) else 1.0

@@ -246,7 +246,7 @@ def axial_depth(view: ProbeView | Plan, distance: np.ndarray) -> np.ndarray:
     """Distance along the viewing direction (as thin-lens depths are measured) of
     points at ray distance ``distance`` (H, W) from the camera location.  The axis is
     the image plane's normal (R x U toward ``direction``), which a lens shift's tilted
-    ``direction`` (:func:`povlens.plan.plan_finish.off_axis_direction`) is not."""
+    ``direction`` (:func:`povlens.plan.camera_setup.off_axis_direction`) is not."""
     cam = view.povray_camera
     D, R, U = (np.asarray(v, dtype=np.float64) for v in (cam.direction, cam.right, cam.up))
     fwd = np.cross(R, U)

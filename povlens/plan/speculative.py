@@ -27,7 +27,8 @@ import numpy as np
 
 from povlens.plan.decision import (FOCAL_BLUR_ADAPTIVE, MIN_SAMPLES, STRONG_VIGNETTING,
                                    shape_error_px)
-from povlens.plan.plan_finish import PlanReuse, PlanStart, finish_plan
+from povlens.plan.plan_finish import PlanReuse, finish_plan
+from povlens.plan.plan_start import PlanStart
 from povlens.plan.options import ConvertOptions, povray_options_of
 from povlens.plan.folder_writer import focal_blur_text, write_folder
 from povlens.plan.render_folder import RenderFolder
@@ -172,7 +173,7 @@ def start_early_samples(opts: ConvertOptions, start: PlanStart, reuse: PlanReuse
     Parameters
     ----------
     opts : the auto conversion's options.
-    start : its :class:`~povlens.plan.plan_finish.PlanStart`.
+    start : its :class:`~povlens.plan.plan_start.PlanStart`.
     reuse : the pupil table, model error and POV-Ray version already known
         (:class:`~povlens.plan.plan_finish.PlanReuse`).
     table : the exit-pupil table, for the render.

@@ -63,7 +63,8 @@ def test_a_lens_no_grid_holds_falls_back_to_pixel_meshes_with_a_note():
 
 
 def test_an_unmeasured_povray_version_falls_back_to_pixel_meshes():
-    from povlens.plan.plan_finish import PlanReuse, finish_plan, start_plan
+    from povlens.plan.plan_finish import PlanReuse, finish_plan
+    from povlens.plan.plan_start import start_plan
     o = _opts()
     plan, _ = finish_plan(o, start_plan(o), PlanReuse(version=lambda: "3.8.0-beta.2"))
     assert plan.field_mesh is None and plan.inputs.ray_mesh == "pixel"
