@@ -10,7 +10,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from povlens.errors import UsageError
 from povlens.lens.paraxial import stopped_down
 from povlens.lens.prescription import LensPrescription, read_lens
 

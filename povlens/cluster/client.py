@@ -41,7 +41,8 @@ from povlens.rendering.groups import (UnitSums, choose_group_size, chunk_groups,
 from povlens.rendering.mesh_samples import mark_batches_done
 from povlens.util.files import write_bytes, write_text
 
-__all__ = ["DaskRenderer", "ENV_VAR", "CONNECT_TIMEOUT_S", "WORKER_WAIT_S", "scheduler_address", "connect",
+__all__ = ["DaskRenderer", "ENV_VAR", "CONNECT_TIMEOUT_S", "WORKER_WAIT_S", "scheduler_address",
+           "connect",
            "render_outdir_on_cluster", "convert_and_render_on_cluster",
            "render_frames_on_cluster", "task_samples"]
 

@@ -177,7 +177,7 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
         d.add_remark((AUTO_NOTE if d.method == "mesh" else PINHOLE_NOTE).format(
             what=describe(lens.aperture_shape)))
     d.numbers["depth_probe"] = info
-    if opts.sampling.vignetting:     # the render of a view applies this profile (rendering/vignetting)
+    if opts.sampling.vignetting:     # a view's render applies this profile (rendering/vignetting)
         d.numbers["illumination_profile"] = profile_record(profile, table)
     if info["no_depth_pixels"]:
         d.add_remark(f"{info['no_depth_pixels']} of the probe's {info['probe_pixels']} pixels "

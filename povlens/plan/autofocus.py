@@ -83,9 +83,10 @@ def focus_point(opts: ConvertOptions) -> tuple[float, float, str]:
     try:
         x, y = (int(v) for v in opts.pose.focus_at)
     except (TypeError, ValueError):
-        raise ParameterError("focus_at", opts.pose.focus_at, f"focus_at={opts.pose.focus_at!r}: not a "
-                             f"pixel", "give 'focus_at' as the column and row of an output "
-                             "pixel") from None
+        at = opts.pose.focus_at
+        raise ParameterError("focus_at", at, f"focus_at={at!r}: not a pixel",
+                             "give 'focus_at' as the column and row of an output pixel"
+                             ) from None
     if not (0 <= x < w and 0 <= y < h):
         raise ParameterError("focus_at", opts.pose.focus_at,
                              f"focus_at={x},{y}: outside the {w}x{h} image",
@@ -275,7 +276,8 @@ def resolve_focus(opts: ConvertOptions) -> tuple[ConvertOptions, dict | None]:
     """
     if opts.pose.focus is not None:
         if opts.pose.focus_at is not None:
-            raise ParameterError("focus_at", opts.pose.focus_at, "'focus' and 'focus_at' both given",
+            raise ParameterError("focus_at", opts.pose.focus_at,
+                                 "'focus' and 'focus_at' both given",
                                  "give one of them")
         return opts.replace(focus_from=opts.pose.focus_from or "option"), None
     if opts.pose.focus_at is None:

@@ -126,8 +126,8 @@ def _choose_automatically(opts: ConvertOptions, render_early, cleanup: contextli
     _settle_speculation(choice, guess)
     samples = decision.samples if opts.sampling.auto_samples else opts.sampling.sample_count
     if not opts.sampling.auto_samples:
-        decision.add_remark(f"--samples {opts.sampling.sample_count} given: it replaces the decision's "
-                            f"{decision.samples}")
+        decision.add_remark(f"--samples {opts.sampling.sample_count} given: it replaces the "
+                            f"decision's {decision.samples}")
     choice.chosen = opts.replace(method=decision.method, samples=samples)
     return choice
 
@@ -226,7 +226,8 @@ def convert(opts: ConvertOptions, render_early=None, depth_probe=None) -> Plan:
         plan.add_note(pinhole_focus_note(opts))           # pinhole: no probe for the focus
         if choice is not None:
             req = choice.requested
-            plan.record_auto_choice(choice.decision, req.auto.tolerance_px, req.sampling.auto_samples)
+            plan.record_auto_choice(choice.decision, req.auto.tolerance_px,
+                                    req.sampling.auto_samples)
             if choice.early is not None:
                 # the samples the final plan adds follow in the same pipeline; what the
                 # folder had rendered stays (only the count changed: stale_samples)

@@ -35,7 +35,8 @@ from povlens.lens.focus import UNITS_MM
 from povlens.pov.povray_options import PovrayOptions
 
 __all__ = ["ConvertOptions", "Pose", "FilmOptions", "ApertureOptions", "Sampling",
-           "AutoOptions", "PovrayPassthrough", "DaskOptions", "dask_options", "OptionSpec", "option", "options", "RECORDS",
+           "AutoOptions", "PovrayPassthrough", "DaskOptions", "dask_options", "OptionSpec",
+           "option", "options", "RECORDS",
            "METHODS", "FIXED_SAMPLES", "povray_options_of", "stored_values",
            "parse_vector", "parse_pixel", "parse_clock", "with_povray_options_checked",
            "SCHEDULER_ENV_VAR"]

@@ -183,7 +183,8 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReus
         thin_lens=model, povray_camera=st.povray_camera, model_error=model_error,
         povray=PovraySettings(version, rw, rh, drop),
         sink_centre=vector_tuple(default_sink_centre(st.location, st.forward)),
-        batches=round_robin_batches(opts.sampling.sample_count, opts.sampling.batch_size), notes=list(st.notes))
+        batches=round_robin_batches(opts.sampling.sample_count, opts.sampling.batch_size),
+        notes=list(st.notes))
     plan.add_note(_antialias_note(opts, st))
     plan.add_note(PINHOLE_NOTE if skip else None)
     plan.add_note(shift_focal_blur_note(plan) if opts.sampling.method == "focal-blur" else None)
