@@ -207,7 +207,7 @@ def renderer_for(scheduler: str | None = None, shared_dir: bool = False,
         return DaskRenderer(dask)
     if shared_dir or group_size is not None:
         name, given = ("shared_dir", "True") if shared_dir else ("group_size", group_size)
-        raise ParameterError(name, given, f"{name}={given} needs 'scheduler'",
+        raise ParameterError(name, given, f"'{name}' needs 'scheduler'",
                              f"give the scheduler's address, or leave out '{name}'")
     from povlens.rendering.local_renderer import LocalRenderer    # loads OpenImageIO
     return LocalRenderer(jobs)

@@ -487,11 +487,12 @@ class DaskOptions(_Record):
 
     TITLE = "distributed rendering (Dask; pip install 'povlens[distributed]')"
 
-    scheduler: str | None = option(
+    #: An address, or (through the API) a ``distributed.Client`` the caller keeps.
+    scheduler: str | object | None = option(
         None, "render the lens samples on the Dask cluster of this scheduler "
         "(tcp://HOST:8786; default: $POVLENS_SCHEDULER, else this machine); the workers "
         "need POV-Ray and povlens; the scene's folder (include files, image maps) is sent "
-        "to them", flag="--scheduler", metavar="ADDRESS", check=text_path)
+        "to them", flag="--scheduler", metavar="ADDRESS")
     shared_dir: bool = option(
         False, "with --scheduler: the workers see the scene, lens and OUTDIR at the same "
         "paths (a shared filesystem), so nothing is sent and they write the samples in "
