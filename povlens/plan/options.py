@@ -181,10 +181,14 @@ def text_path(name: str, value) -> str:
 
 
 def texts(name: str, value) -> tuple[str, ...]:
+    """A tuple of texts; one text is one item (``library_paths="inc"``: one folder)."""
     if isinstance(value, str):
-        raise ParameterError(name, value, f"{name}={value!r}: give a list of texts, "
-                             f"e.g. ({value!r},)")
-    return tuple(str(v) for v in value)
+        return (value,)
+    try:
+        return tuple(str(v) for v in value)
+    except TypeError:
+        raise ParameterError(name, value, f"{name}={value!r}: give a text or a list of "
+                                          f"texts") from None
 
 
 # --- the declaration -------------------------------------------------------------

@@ -89,7 +89,7 @@ REFUSED = [
     ("clock", math.inf, "finite"),
     ("blade_curvature", math.nan, "finite"),
     ("jitter", "yes", "True or False"),
-    ("library_paths", "/usr/share", "list"),
+    ("library_paths", 3, "list of texts"),
 ]
 
 
@@ -132,6 +132,11 @@ def test_help_shows_the_declared_default():
     add_convert_arguments(p)
     text = p.format_help()
     assert "(default 640)" in text and "(default 35)" in text and "(default auto)" in text
+
+
+def test_one_text_is_one_item():
+    opts = ConvertOptions.of(SCENE, "l", "o", library_paths="inc", povray_options="+A0.3")
+    assert opts.povray.library_paths == ("inc",) and opts.povray.povray_options == ("+A0.3",)
 
 
 def test_the_plan_keeps_the_stored_options_as_given():

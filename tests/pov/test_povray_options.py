@@ -56,8 +56,8 @@ def test_library_paths_and_clock_are_checked(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "inc").mkdir()
     opts = PovrayOptions(library_paths="inc", clock=1, extra_options="+A0.3")
-    assert opts.povray.library_paths == (str(tmp_path / "inc"),)      # absolute, one str = one path
-    assert opts.povray.clock == 1.0 and opts.extra_options == ("+A0.3",)
+    assert opts.library_paths == (str(tmp_path / "inc"),)      # absolute, one str = one path
+    assert opts.clock == 1.0 and opts.extra_options == ("+A0.3",)
     assert opts.switches() == [f"+L{tmp_path / 'inc'}", "+K1.0", "+A0.3"]
     with pytest.raises(ParameterError) as info:
         PovrayOptions(library_paths=["inc", "nowhere"])
