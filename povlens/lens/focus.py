@@ -28,7 +28,8 @@ from povlens.lens.tracer import trace_from_scene
 from povlens.util.minimize import bounded_minimum  # scipy's, without its 0.5 s import
 
 __all__ = ["FocusResult", "thick_lens_film_distance_mm", "closest_focus_distance_mm",
-           "exact_film_distance_mm", "focus", "UNITS_MM", "LENS_SIDE_UNITS", "to_mm"]
+           "exact_film_distance_mm", "focus", "UNITS_MM", "LENS_SIDE_UNITS", "to_mm",
+           "axial_bundle", "BUNDLE_START_MM"]
 
 UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 #: The unit of an object distance on the lens side (``povlens focus``, ``pupil``,
@@ -65,15 +66,16 @@ def thick_lens_film_distance_mm(lens: LensPrescription, distance_mm: float,
         return p.bfl
     f = p.efl
     L = distance_mm - p.total_track + _hiatus_terms(p)
-    disc = L * L - 4.0 * f * L
-    if not (L > 0 and disc >= 0):
+    # Smaller root of v^2 - L v + f L = 0 without cancellation or overflow at any L:
+    # v = 2 f / (1 + sqrt(1 - 4 f / L)), which tends to f as L grows (no L^2 formed).
+    ratio = 1.0 - 4.0 * f / L if L > 0 else -1.0
+    if not ratio >= 0:
         raise OpticsError(
             f"cannot focus {lens.source} at {distance_mm:g} mm from the film: the object is "
             f"inside the closest focus distance",
             f"the closest distance that works is {closest_focus_distance_mm(lens, p):.6g} mm "
             f"(object to film)")
-    # Smaller root, written without cancellation: v = 2 f L / (L + sqrt(L^2 - 4 f L)).
-    v = 2.0 * f * L / (L + math.sqrt(disc))
+    v = 2.0 * f / (1.0 + math.sqrt(ratio))
     return v + p.principal_rear_from_rear_vertex
 
 
@@ -89,21 +91,49 @@ def pupil_disc_points(n_rings: int) -> np.ndarray:
     return np.concatenate(pts)
 
 
+#: Where an axial bundle starts: this far (mm) in front of the front vertex.
+BUNDLE_START_MM = 1.0
+
+
+def axial_bundle(p: ParaxialData, film_distance_mm: float, distance_mm: float,
+                 pupil_points_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rays of the on-axis object point ``distance_mm`` from the film through the
+    entrance-pupil points ``pupil_points_mm`` (m, 2), started just in front of the lens.
+
+    Every quantity is a difference of nearby lengths or a ratio close to 1, so the rays
+    are as exact for an object at 1e14 mm as at 1 m; ``inf`` is the collimated beam,
+    the limit of the same formulas (an object at the origin of a huge number would lose
+    the rays' directions to rounding: their slopes are pupil radius / distance).
+
+    Returns
+    -------
+    origin, direction : (m, 3) arrays, mm and unit-free (camera frame, +z toward the
+        scene); the origin at :data:`BUNDLE_START_MM` in front of the front vertex, or at
+        the object when it is closer.
+    """
+    front_z = film_distance_mm + p.total_track
+    ep_z = front_z - p.entrance_pupil_position
+    start_z = min(front_z + BUNDLE_START_MM, distance_mm)
+    m = len(pupil_points_mm)
+    if math.isinf(distance_mm):
+        along, slope = 1.0, np.zeros((m, 2))
+    else:
+        span = distance_mm - ep_z          # object to entrance pupil, > 0
+        # the ray from (0, 0, D) through (x, y, z_ep) is at (x, y) (D - z) / (D - z_ep)
+        along = (distance_mm - start_z) / span
+        slope = pupil_points_mm / span
+    origin = np.column_stack([pupil_points_mm * along, np.full(m, start_z)])
+    direction = np.column_stack([slope, np.full(m, -1.0)])
+    return origin, direction
+
+
 def rms_spot_mm(lens: LensPrescription, film_distance_mm: float, distance_mm: float,
                 p: ParaxialData | None = None, n_rings: int = 16, pupil_fill: float = 1.0
                 ) -> tuple[float, int]:
     """RMS radius (mm) on the film of an axial object's bundle; and how many rays passed."""
     p = p or paraxial_data(lens)
     disc = pupil_disc_points(n_rings) * (0.5 * p.entrance_pupil_diameter * pupil_fill)
-    front_z = film_distance_mm + p.total_track
-    ep_z = front_z - p.entrance_pupil_position
-    if math.isinf(distance_mm):
-        origin = np.column_stack([disc, np.full(len(disc), front_z + 1.0)])
-        direction = np.tile([0.0, 0.0, -1.0], (len(disc), 1))
-    else:
-        origin = np.tile([0.0, 0.0, distance_mm], (len(disc), 1))
-        target = np.column_stack([disc, np.full(len(disc), ep_z)])
-        direction = target - origin
+    origin, direction = axial_bundle(p, film_distance_mm, distance_mm, disc)
     r = trace_from_scene(lens, film_distance_mm, origin, direction)
     o, d = r.origin_mm[r.passed], r.direction[r.passed]
     if len(o) < 3:

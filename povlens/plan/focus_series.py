@@ -42,10 +42,10 @@ def _distance(text: str, whole: str) -> float:
         raise ParameterError("focus", whole, f"focus={whole}: '{text}' is not a number",
                              "give DIST, A:B (a pull, with --frames N) or D1,D2,... "
                              "(scene units)") from None
-    if not (v > 0 and math.isfinite(v)):
+    if not v > 0:
         raise ParameterError("focus", whole, f"focus={whole}: '{text}' must be a positive "
-                             f"finite distance", "distances are scene units from the "
-                             "camera; for infinity give a far one, e.g. 1e6")
+                             f"distance", "distances are scene units from the camera; "
+                             "inf focuses at infinity")
     return v
 
 
@@ -118,8 +118,10 @@ def focus_series(focus, frames: int | None) -> list[float] | None:
     text = focus.text()
     for v in (focus.values or (focus.start, focus.end)):
         if not (v > 0 and math.isfinite(v)):
-            raise ParameterError("focus", text, f"focus={text}: distances must be positive "
-                                 f"and finite")
+            raise ParameterError("focus", text, f"focus={text}: a pull's distances must be "
+                                 f"positive and finite", "for infinity end the pull at a far "
+                                 "distance (1e6 m focuses within 0.1 % of infinity's spot); "
+                                 "a still takes inf")
     if focus.values is not None:
         if not focus.values:
             raise ParameterError("focus", text, "focus: the list of distances is empty")

@@ -108,10 +108,14 @@ def positive(name: str, value) -> float:
 
 
 def distance(name: str, value) -> float:
-    v = _number(name, value)
+    """A positive distance in scene units; ``inf`` (focus at infinity) is one."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(name, value, f"{name}={value!r}: not a number") from None
     if not v > 0:
         raise ParameterError(name, value, f"{name}={value}: must be a positive distance in "
-                                          f"scene units")
+                                          f"scene units (inf: infinity)")
     return v
 
 
@@ -243,7 +247,8 @@ class Pose(_Record):
     """Where the camera is, what it looks at and focuses on (scene units)."""
 
     focus: float | None = option(
-        None, "distance from the camera location to the plane in focus (default: the scene "
+        None, "distance from the camera location to the plane in focus, inf for infinity "
+        "(default: the scene "
         "camera's focal_point if it has focal blur, else the distance to its look_at, else "
         "what the depth probe sees at the centre of the frame); convert/render: A:B with "
         "--frames N is a focus pull from A to B (even steps in dioptres), D1,D2,... one "

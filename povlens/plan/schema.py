@@ -164,7 +164,9 @@ class Inputs:
     def from_dict(cls, d: dict) -> "Inputs":
         size, at, clock = d.get("film_size_mm"), d.get("focus_at"), d.get("clock")
         shift = d.get("shift_mm")
-        return _fields_of(cls, d, film_size_mm=None if size is None else tuple(size),
+        focus = math.inf if d["focus"] is None else d["focus"]   # null: infinity
+        return _fields_of(cls, d, focus=focus,
+                          film_size_mm=None if size is None else tuple(size),
                           shift_mm=None if shift is None else (float(shift[0]),
                                                                float(shift[1])),
                           focus_at=None if at is None else (int(at[0]), int(at[1])),
@@ -202,8 +204,9 @@ class FocusSolution:
 
     @classmethod
     def from_dict(cls, d: dict) -> "FocusSolution":
-        return _fields_of(cls, d, object_distance_from_film_mm=_inf_if_none(
-            d["object_distance_from_film_mm"]))
+        return _fields_of(cls, d, focus_from_camera_mm=_inf_if_none(d["focus_from_camera_mm"]),
+                          object_distance_from_film_mm=_inf_if_none(
+                              d["object_distance_from_film_mm"]))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,12 +15,12 @@ import numpy as np
 
 from povlens.lens.chief_ray import chief_rays
 from povlens.lens.film import Film
-from povlens.lens.focus import pupil_disc_points
+from povlens.lens.focus import BUNDLE_START_MM, pupil_disc_points
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_scene
 from povlens.thinlens.model import EquivalentThinLens
 
-__all__ = ["ModelError", "measure_model_error", "measure_model_error_reference",
+__all__ = ["ModelError", "measure_model_error", "measure_model_error_reference", "rays_near_lens",
            "CHIEF_RAY_MEMO"]
 
 
@@ -214,6 +214,37 @@ def measure_model_error(lens: LensPrescription, film_distance_mm: float,
     return _model_error_summary(depths, hs, out)
 
 
+def rays_near_lens(lens: LensPrescription, film_distance_mm: float, depth_z_mm, tan,
+                   pupil_xy, ep_z: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rays from object points through pupil points, started just in front of the lens.
+
+    The object point at camera-frame depth ``depth_z_mm`` lies in the direction ``tan``
+    (x/z, y/z) seen from the entrance-pupil centre on the plane z = ``ep_z``; its ray
+    passes the pupil point ``pupil_xy`` on that plane.  Arrays broadcast: ``depth_z_mm``
+    (...), ``tan`` and ``pupil_xy`` (..., 2).  A far object's rays are written as slopes
+    (a ratio of nearby lengths) and start 1 mm in front of the front vertex (the object
+    itself when it is closer), so a depth of 1e14 mm, or ``inf`` (a collimated beam),
+    is as exact as 1 m: no coordinate of the size of the depth reaches the tracer.
+
+    Returns
+    -------
+    origin, direction : (..., 3) arrays (mm; unit-free, not normalised).
+    """
+    depth = np.asarray(depth_z_mm, dtype=np.float64)
+    dist = depth - ep_z                                       # object beyond the pupil
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = tan - pupil_xy / dist[..., None]              # (x - x_p) / (z - z_p)
+    start = np.minimum(film_distance_mm + lens.total_track_mm + BUNDLE_START_MM, depth)
+    shape = np.broadcast_shapes(slope.shape[:-1], np.shape(start))
+    origin = np.empty(shape + (3,))
+    origin[..., :2] = pupil_xy + slope * (start - ep_z)[..., None]
+    origin[..., 2] = start
+    direction = np.empty(shape + (3,))
+    direction[..., :2] = -slope
+    direction[..., 2] = -1.0
+    return origin, direction
+
+
 def _trace_bundles(lens, film_distance_mm, model, depths, target_film, disc, ep_z, centres):
     """Trace every (depth, film height) bundle of :func:`measure_model_error` in one call.
 
@@ -224,15 +255,9 @@ def _trace_bundles(lens, film_distance_mm, model, depths, target_film, disc, ep_
     m = len(disc)
     nd, nf = len(depths), len(target_film)
     tan = -target_film / model.image_distance_mm              # (F, 2)
-    dist = depths - ep_z                                      # (D,)
-    obj = np.empty((nd, nf, 3))
-    obj[..., :2] = tan[None, :, :] * dist[:, None, None]
-    obj[..., 2] = depths[:, None]
-    pupil = np.empty((nf, m, 3))
-    pupil[..., :2] = disc[None, :, :] + centres[:, None, :]
-    pupil[..., 2] = ep_z
-    direction = pupil[None, :, :, :] - obj[:, :, None, :]     # (D, F, M, 3)
-    origin = np.broadcast_to(obj[:, :, None, :], direction.shape)
+    pupil = disc[None, :, :] + centres[:, None, :]            # (F, M, 2) on z = ep_z
+    origin, direction = rays_near_lens(lens, film_distance_mm, depths[:, None, None],
+                                       tan[None, :, None, :], pupil[None], ep_z)
     res = trace_from_scene(lens, film_distance_mm, origin.reshape(-1, 3),
                            direction.reshape(-1, 3))
     ok = res.passed.reshape(nd, nf, m)
@@ -284,14 +309,12 @@ def measure_model_error_reference(lens: LensPrescription, film_distance_mm: floa
             "relative_illumination")}
     axis_pass = None
     for a, z in enumerate(depths):
-        dist = z - ep_z
         for b, hgt in enumerate(hs):
             target_film = -hgt * diag_dir                     # model image point on the film
             tan = -target_film / model.image_distance_mm       # object direction from the EP
-            obj = np.array([tan[0] * dist, tan[1] * dist, z])
-            pupil = np.column_stack([disc + centres[b], np.full(m, ep_z)])
-            direction = pupil - obj
-            res = trace_from_scene(lens, film_distance_mm, np.tile(obj, (m, 1)), direction)
+            origin, direction = rays_near_lens(lens, film_distance_mm, np.full(m, z), tan,
+                                               disc + centres[b], ep_z)
+            res = trace_from_scene(lens, film_distance_mm, origin, direction)
             o, d = res.origin_mm[res.passed], res.direction[res.passed]
             frac = len(o) / m
             if axis_pass is None:

@@ -62,3 +62,57 @@ def test_exact_focus_of_a_strongly_aberrated_singlet():
     r = focus(lens, math.inf)
     assert r.exact_film_distance_mm < r.thick_lens_film_distance_mm - 1.0
     assert r.exact_rms_spot_mm < r.thick_lens_rms_spot_mm
+
+
+# --- far focus: an object at infinity is a collimated beam, a far one no large number --
+
+FAR_MM = [1e6, 1e9, 1e10, 1e13, 1e17, 1e300]      # 1 km ... beyond any scene
+
+
+@pytest.mark.parametrize("name", ["dgauss.50mm", "tessar.50mm", "telephoto.250mm"])
+def test_far_focus_converges_to_the_focus_at_infinity(name):
+    """The real-ray spot and film distance at 1 km ... 1e300 mm approach infinity's
+    smoothly (within 1 % of the spot from 1e6 mm on), where the object at the origin of
+    a huge number lost the rays' slopes to rounding (12.5 um at 1e4 m, 3.8 mm at 1e7 m)."""
+    lens = read_lens(LENS_DIR / f"{name}.dat")
+    at_inf = focus(lens, math.inf)
+    assert math.isfinite(at_inf.exact_rms_spot_mm)
+    for d in FAR_MM:
+        r = focus(lens, d)
+        assert r.exact_rms_spot_mm == pytest.approx(at_inf.exact_rms_spot_mm, rel=0.01), d
+        newton = 2.0 * lens_efl(lens) ** 2 / d                # Newton: dz' = f^2 / z
+        assert abs(r.thick_lens_film_distance_mm - at_inf.thick_lens_film_distance_mm) <= (
+            newton + 1e-9), d
+        assert abs(r.exact_film_distance_mm - at_inf.exact_film_distance_mm) <= (
+            newton + 1e-6), d
+
+
+def lens_efl(lens) -> float:
+    from povlens.lens.paraxial import paraxial_data
+    return paraxial_data(lens).efl
+
+
+def test_the_bundle_started_near_the_lens_is_the_bundle_from_the_object():
+    """At a near distance, where starting at the object is exact, the rays started in
+    front of the lens (focus.axial_bundle) are the same lines: equal film distance and
+    spot to 1e-9 mm."""
+    import numpy as np
+    from povlens.lens.focus import axial_bundle, pupil_disc_points
+    from povlens.lens.paraxial import paraxial_data
+    from povlens.lens.tracer import trace_from_scene
+    lens = read_lens(LENS_DIR / "dgauss.50mm.dat")
+    p = paraxial_data(lens)
+    film_d, d = 37.0, 1500.0
+    disc = pupil_disc_points(8) * (0.5 * p.entrance_pupil_diameter)
+    origin, direction = axial_bundle(p, film_d, d, disc)
+    ep_z = film_d + p.total_track - p.entrance_pupil_position
+    obj = np.tile([0.0, 0.0, d], (len(disc), 1))
+    old = trace_from_scene(lens, film_d, obj, np.column_stack([disc, np.full(len(disc), ep_z)])
+                           - obj)
+    new = trace_from_scene(lens, film_d, origin, direction)
+    assert (old.passed == new.passed).all()
+
+    def on_film(r):
+        t = -r.origin_mm[:, 2] / r.direction[:, 2]
+        return (r.origin_mm[:, :2] + t[:, None] * r.direction[:, :2])[r.passed]
+    np.testing.assert_allclose(on_film(new), on_film(old), atol=1e-9)

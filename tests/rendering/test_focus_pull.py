@@ -52,7 +52,7 @@ def test_parse_focus_forms():
     (["--focus", "1:3", "--frames", "0"], ["--frames 0", ">= 1"]),
     (["--focus", "0:3", "--frames", "3"], ["--focus 0:3", "positive"]),
     (["--focus", "1:-2", "--frames", "3"], ["'-2'", "positive"]),
-    (["--focus", "1:inf", "--frames", "3"], ["'inf'", "1e6"]),
+    (["--focus", "1:inf", "--frames", "3"], ["positive and finite", "1e6", "a still takes inf"]),
     (["--focus", "2,x,5"], ["'x' is not a number"]),
     (["--focus", "1:2:3", "--frames", "3"], ["A:B"]),
     (["--focus", "1:3,4", "--frames", "3"], ["not both"]),

@@ -74,3 +74,29 @@ def test_null_reads_as_nan():
         d[k] = [[1.0, None]]
     e = ModelError.from_dict(d)
     assert math.isnan(e.elongation[0][1]) and e.film_height_mm == (0.0, 1.0)
+
+
+def test_far_depths_are_exact_and_infinity_is_their_limit():
+    """Bundles from 1 km to 1e300 mm and from infinity (a collimated beam) start near
+    the lens (rays_near_lens): the blur and distortion converge, nothing is NaN, and
+    the vectorized measurement equals the one-bundle-at-a-time reference."""
+    import math
+    import numpy as np
+    from povlens.lens.film import Film
+    from povlens.lens.focus import exact_film_distance_mm
+    from povlens.lens.prescription import read_lens
+    from povlens.thinlens.model import fit_thin_lens
+    from povlens.thinlens.model_error import (measure_model_error,
+                                              measure_model_error_reference)
+    lens = read_lens("dgauss.50mm")
+    film_d, _ = exact_film_distance_mm(lens, math.inf)
+    film = Film.from_diagonal(35.0, 64, 48)
+    model = fit_thin_lens(lens, film_d, math.inf, film)
+    depths = [1e6, 1e10, 1e14, 1e300, math.inf]
+    e = measure_model_error(lens, film_d, model, film, depths, n_field=5)
+    ref = measure_model_error_reference(lens, film_d, model, film, depths, n_field=5)
+    for name in ("blur_real_px", "distortion_px"):
+        a = np.asarray(getattr(e, name))
+        assert np.isfinite(a).all(), name
+        np.testing.assert_allclose(a[1:], np.broadcast_to(a[-1], a[1:].shape), atol=2e-5)
+        np.testing.assert_allclose(a, np.asarray(getattr(ref, name)), atol=1e-12)
