@@ -27,7 +27,7 @@ from povlens.lens.prescription import (AIR, MAX_INDEX, MAX_LENGTH_MM, MIN_LENGTH
                                        format_lens, read_lens)
 from povlens.util.files import write_text
 
-__all__ = ["LensImportWarning", "SourceRow", "ImportedLens", "build_lens", "decode_text"]
+__all__ = ["LensImportWarning", "SourceRow", "ImportedLens", "build_lens"]
 
 
 class LensImportWarning(PovlensWarning):
@@ -135,27 +135,6 @@ class ImportedLens:
         if back != self.lens:  # the format round-trips exactly; anything else is a bug
             raise AssertionError(f"{path}: the written lens does not read back the same")
         return back
-
-
-def decode_text(raw: bytes) -> str:
-    """Text of a file in UTF-16 (with or without byte-order mark), UTF-8 or Latin-1.
-
-    Optical-design programs write UTF-16 LE with a BOM (Zemax OpticStudio), older
-    ones ASCII; a file without BOM whose every other byte is NUL is UTF-16 too.
-    """
-    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
-        return raw.decode("utf-16")
-    if raw.startswith(b"\xef\xbb\xbf"):
-        return raw[3:].decode("utf-8", errors="replace")
-    head = raw[:400]
-    if len(head) >= 2 and head.count(b"\x00") * 3 > len(head):
-        odd_nuls = head[1::2].count(b"\x00")
-        return raw.decode("utf-16-le" if odd_nuls >= head[0::2].count(b"\x00") else "utf-16-be",
-                          errors="replace")
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError:
-        return raw.decode("latin-1")
 
 
 def _check_row(row: SourceRow, last: bool, where: str) -> None:

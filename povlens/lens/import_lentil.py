@@ -33,7 +33,8 @@ import os
 from pathlib import Path
 
 from povlens.errors import LensFileError, ParameterError
-from povlens.lens.import_common import ImportedLens, SourceRow, build_lens, decode_text
+from povlens.lens.import_common import ImportedLens, SourceRow, build_lens
+from povlens.util.files import decode_text
 from povlens.lens.prescription import LensPrescription, read_source_bytes
 
 __all__ = ["FLAT_RADIUS_MM", "LentilEntry", "list_lentil", "import_lentil", "read_lentil",

@@ -49,9 +49,9 @@ import warnings
 from pathlib import Path
 
 from povlens.errors import LensFileError
-from povlens.lens.import_common import (ImportedLens, LensImportWarning, SourceRow, build_lens,
-                                        decode_text)
+from povlens.lens.import_common import ImportedLens, LensImportWarning, SourceRow, build_lens
 from povlens.lens.prescription import LensPrescription, read_source_bytes, sag_mm
+from povlens.util.files import decode_text
 
 __all__ = ["ZmxSurface", "ZmxFile", "parse_zmx_text", "import_zmx", "read_zmx", "UNIT_MM"]
 

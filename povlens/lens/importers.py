@@ -12,7 +12,8 @@ import os
 from pathlib import Path
 
 from povlens.errors import LensFileError, ParameterError
-from povlens.lens.import_common import ImportedLens, decode_text
+from povlens.lens.import_common import ImportedLens
+from povlens.util.files import decode_text
 from povlens.lens.import_lentil import import_lentil, list_hint, list_lentil
 from povlens.lens.import_zemax import import_zmx
 

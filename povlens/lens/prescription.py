@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from povlens.errors import LensClipWarning, LensFileError
+from povlens.util.files import decode_text
 from povlens.util.resources import LENS_DIR
 from povlens.util.files import write_bytes
 
@@ -236,11 +237,7 @@ def read_lens(path: str | os.PathLike) -> LensPrescription:
     p = resolve_lens_path(path)
     raw = read_source_bytes(p, "lens file", "give the path of a lens file, or the name of a "
                             "bundled lens (see 'povlens lenses')", shown=path)
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-    return parse_lens_text(text, str(p))
+    return parse_lens_text(decode_text(raw), str(p))      # UTF-16 (Windows editors) too
 
 
 def _parse_number(tok: str, source: str, line: int, column: str) -> float:

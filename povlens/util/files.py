@@ -1,7 +1,9 @@
 """Atomic file output: a file appears at its final name complete or not at all.
 
 Every writer in povlens goes through :func:`atomic_output` (a temporary name in the
-same folder, renamed on success, removed on failure).
+same folder, renamed on success, removed on failure).  Text read from users' files is
+decoded by :func:`decode_text` (UTF-16 as Windows editors and Zemax write it, UTF-8,
+Latin-1).
 """
 from __future__ import annotations
 
@@ -62,3 +64,24 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     with atomic_output(path) as tmp:
         tmp.write_bytes(data)
     return path
+
+
+def decode_text(raw: bytes) -> str:
+    """Text of a file in UTF-16 (with or without byte-order mark), UTF-8 or Latin-1.
+
+    Optical-design programs write UTF-16 LE with a BOM (Zemax OpticStudio), older
+    ones ASCII; a file without BOM whose every other byte is NUL is UTF-16 too.
+    """
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return raw.decode("utf-16")
+    if raw.startswith(b"\xef\xbb\xbf"):
+        return raw[3:].decode("utf-8", errors="replace")
+    head = raw[:400]
+    if len(head) >= 2 and head.count(b"\x00") * 3 > len(head):
+        odd_nuls = head[1::2].count(b"\x00")
+        return raw.decode("utf-16-le" if odd_nuls >= head[0::2].count(b"\x00") else "utf-16-be",
+                          errors="replace")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")

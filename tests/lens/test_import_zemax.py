@@ -9,7 +9,8 @@ from conftest import ROOT
 from import_reference import reference, rim_sag, with_stop_plane, zmx_system
 
 from povlens.errors import LensClipWarning, LensFileError, ParameterError
-from povlens.lens.import_common import LensImportWarning, decode_text
+from povlens.lens.import_common import LensImportWarning
+from povlens.util.files import decode_text
 from povlens.lens.import_zemax import import_zmx, parse_zmx_text, read_zmx
 from povlens.lens.importers import import_lens_file, source_format
 from povlens.lens.paraxial import paraxial_data

@@ -87,3 +87,14 @@ def test_empty_and_missing_files(tmp_path):
 def test_format_lens_is_exact_for_awkward_numbers():
     lens = parse_lens_text("0.1 0.30000000000000004 1.5 0.2\n-1e9 0 1 0.2\n")
     assert parse_lens_text(format_lens(lens)) == lens
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be", "utf-8-sig"])
+def test_a_lens_file_saved_as_utf16_or_with_a_bom_reads_as_the_same_lens(tmp_path, encoding):
+    """Windows editors save UTF-16 (with or without a byte-order mark) or UTF-8 with a
+    BOM; the lens is the same, where UTF-16 used to read as '1 columns'."""
+    plain = (LENS_DIR / "dgauss.50mm.dat").read_text()
+    path = tmp_path / f"dgauss-{encoding}.dat"
+    path.write_bytes(plain.encode(encoding))
+    got, want = read_lens(path), read_lens(LENS_DIR / "dgauss.50mm.dat")
+    assert format_lens(got) == format_lens(want)
