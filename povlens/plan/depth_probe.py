@@ -86,9 +86,11 @@ import numpy as np
 from povlens.errors import PovlensError
 from povlens.lens.film import Film
 from povlens.plan.options import povray_options_of
+from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import DepthProbeRecord, Plan, PovrayCamera, read_plan
 from povlens.pov.mesh import pinhole_wrapper
 from povlens.pov.povray_options import PovrayOptions
+from povlens.pov.povray_paths import include_text
 from povlens.pov.process import start_render
 from povlens.pov.sdl import pov_vector
 from povlens.util.files import write_text
@@ -392,7 +394,7 @@ def start_probe(view: ProbeView, folder: str | os.PathLike, *,
     wrappers = folder if keep_wrappers else tmp
     probe = DepthProbe(view, fade_distance, tmp, label or str(folder))
     try:
-        include = os.path.relpath(scene, wrappers)
+        include = include_text(scene, wrappers, RenderFolder(wrappers).scene_link)
         linear = pinhole_wrapper(include, cam.location, cam.direction, cam.right, cam.up,
                                  assumed_gamma=1.0)
         for name, light, fade in (("b0", False, None), ("b1", True, fade_distance),

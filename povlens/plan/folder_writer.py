@@ -17,7 +17,6 @@ times), and what an earlier plan rendered that the new one cannot use is removed
 
 from __future__ import annotations
 
-import os
 import shlex
 import sys
 from pathlib import Path
@@ -26,6 +25,7 @@ from povlens.errors import PovlensError
 from povlens.plan.render_folder import VIEWS, RenderFolder
 from povlens.plan.schema import FocalBlurSettings, Plan, read_plan, write_plan
 from povlens.pov.mesh import SINK_RADIUS, focal_blur_wrapper, pinhole_wrapper
+from povlens.pov.povray_paths import include_text
 from povlens.pov.sdl import pov_string, pov_vector, read_template
 from povlens.util.files import write_text
 
@@ -50,8 +50,11 @@ def write_if_changed(path: Path, text: str) -> None:
     write_text(path, text)
 
 
-def _scene_include(plan: Plan, outdir: Path) -> str:
-    return os.path.relpath(plan.inputs.scene, outdir)
+def _scene_include(plan: Plan, outdir: Path, wrapper_dir: Path | None = None) -> str:
+    """How a wrapper in ``wrapper_dir`` (default ``outdir``) includes the scene: its
+    relative path, or the folder's ASCII link to it (:func:`include_text`)."""
+    return include_text(plan.inputs.scene, wrapper_dir or outdir,
+                        RenderFolder(outdir).scene_link)
 
 
 def blur_settings(plan: Plan, settings: FocalBlurSettings | None = None) -> dict:
@@ -80,7 +83,7 @@ def focal_blur_text(plan: Plan, outdir: Path, settings: FocalBlurSettings | None
 
 def _batch_wrapper(plan: Plan, outdir: Path) -> str:
     """Animation wrapper (templates/mesh_batch.pov.tmpl): frame k renders sample k."""
-    scene = os.path.relpath(plan.inputs.scene, RenderFolder(outdir).samples)
+    scene = _scene_include(plan, outdir, RenderFolder(outdir).samples)
     names = RenderFolder.mesh_include_names()
     if plan.field_mesh is not None:
         return read_template("field_batch.pov.tmpl").substitute(

@@ -117,6 +117,13 @@ class RenderFolder:
         return self.path / PLAN_FILE
 
     @property
+    def scene_link(self) -> Path:
+        """An ASCII link to the scene, which the wrappers include when POV-Ray cannot
+        read the scene's own path (spaces, quotes, non-ASCII:
+        :func:`povlens.pov.povray_paths.include_text`); absent otherwise."""
+        return self.path / "povlens-scene.pov"
+
+    @property
     def pupil_npz(self) -> Path:
         """The exit-pupil table, reused while its inputs hold
         (:func:`povlens.pupil.storage.cached_pupil_table`)."""

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Iterable
 
 from povlens.errors import ParameterError
+from povlens.pov.povray_paths import command_line_path, quoted_value
 
 __all__ = ["PovrayOptions", "check_povray_option", "as_povray_options"]
 
@@ -97,6 +98,21 @@ def _switch_name(body: str) -> str | None:
     """POV-Ray's name for the switch ``+body`` (:data:`_SWITCH_NAMES`), or None."""
     upper = body.upper()
     return next((n for n in _SWITCH_NAMES if upper.startswith(n)), None)
+
+
+def _quoted_option(option: str) -> str:
+    """``option`` with a value holding spaces quoted (POV-Ray splits its command line
+    again at spaces): ``Name=a b`` -> ``Name="a b"``, ``+HIa b`` -> ``+HI"a b"``."""
+    if not any(c.isspace() for c in option):
+        return option
+    m = _INI.match(option)
+    if m is not None:
+        return option[:m.end()] + quoted_value(option[m.end():].strip())
+    name = _switch_name(option[1:]) if option[:1] in "+-" else None
+    if name is not None:
+        cut = 1 + len(name)
+        return option[:cut] + quoted_value(option[cut:])
+    return option
 
 
 def _refuse(option: str, why: str, hint: str | None = None) -> ParameterError:
@@ -208,9 +224,11 @@ class PovrayOptions:
 
     def switches(self) -> list[str]:
         """The command-line arguments: ``+L<folder>`` each, ``+K<clock>``, then the
-        extra options in their order."""
+        extra options in their order; paths and values as POV-Ray reads them
+        (:mod:`povlens.pov.povray_paths`: quoted, or an ASCII link)."""
         clock = [] if self.clock is None else [f"+K{self.clock!r}"]
-        return [*(f"+L{p}" for p in self.library_paths), *clock, *self.extra_options]
+        return [*(f"+L{command_line_path(p)}" for p in self.library_paths), *clock,
+                *map(_quoted_option, self.extra_options)]
 
     def antialiasing(self) -> bool | None:
         """Whether the extra options turn POV-Ray's anti-aliasing on (``+A``,

@@ -47,6 +47,7 @@ from povlens.errors import PovrayError, UsageError
 from povlens.pov.executable import ENV_VAR, find_povray
 from povlens.pov.povray_options import PovrayOptions, as_povray_options
 from povlens.pov.povray_output import error_in_wrapper, povray_error_text
+from povlens.pov.povray_paths import command_line_path
 from povlens.util.files import atomic_output
 from povlens.util.signals import interrupts_deferred
 
@@ -180,7 +181,7 @@ def render_switches(
     return [
         fmt, f"+W{width}", f"+H{height}", "-A", f"+WT{threads}",
         *spans,
-        *(f"+L{Path(p).absolute()}" for p in library_paths),
+        *(f"+L{command_line_path(Path(p).absolute())}" for p in library_paths),
         *user,
         *extra_args,
     ]  # fmt: skip
