@@ -37,6 +37,7 @@ templates (:meth:`RenderFolder.makefile_names`, :meth:`RenderFolder.mesh_include
 from __future__ import annotations
 
 import io
+import math
 import os
 import re
 from pathlib import Path
@@ -325,14 +326,16 @@ class RenderFolder:
     # -- readers and writers of the small files -----------------------------------------
 
     def read_exposure(self) -> float | None:
-        """The exposure in :attr:`exposure_txt`, None if there is none or it does not
-        read as a number (it is then computed again)."""
+        """The exposure in :attr:`exposure_txt`, None if there is none or it is no
+        positive finite number (damaged: it is then computed again, so no NaN or inf
+        reaches an image)."""
         if not self.exposure_txt.exists():
             return None
         try:
-            return float(self.exposure_txt.read_text())
-        except ValueError:
+            value = float(self.exposure_txt.read_text())
+        except (ValueError, OSError):
             return None
+        return value if math.isfinite(value) and value > 0 else None
 
     def write_exposure(self, exposure: float) -> None:
         write_text(self.exposure_txt, f"{exposure!r}\n")

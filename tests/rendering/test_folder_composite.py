@@ -72,3 +72,20 @@ def test_a_damaged_pass_mask_is_a_clear_error_naming_the_file(tmp_path):
     np.save(masks[0], np.zeros((3, 1), np.uint8))       # the wrong size
     with pytest.raises(PovlensError, match="mask"):
         composite_outdir(out, write=False)
+
+
+@pytest.mark.parametrize("text", ["nan", "inf", "-1", "0", "", "1e400"])
+def test_a_damaged_exposure_is_computed_again(tmp_path, text):
+    """exposure.txt holding no positive finite number (issue 24 item 5: 'nan', 'inf' or
+    '-1' made the image NaN, inf or wrong with exit 0) is computed again: the image
+    equals the first composite's, and the file is rewritten."""
+    convert(opts(tmp_path, samples=2, batch_size=2))
+    out = tmp_path / "out"
+    render_outdir(out, jobs=2, quiet=True)
+    good = read_image(out / "image.exr")
+    saved = (out / "exposure.txt").read_text()
+    (out / "exposure.txt").write_text(text)
+    again = composite_outdir(out)
+    assert np.isfinite(again).all()
+    np.testing.assert_array_equal(read_image(out / "image.exr"), good)
+    assert (out / "exposure.txt").read_text() == saved
