@@ -16,6 +16,17 @@ LENS_DIR = ROOT / "lenses"
 SHIPPED_LENSES = sorted(p.name for p in LENS_DIR.glob("*.dat"))
 
 
+def paper_options(tmp_path, **kw):
+    """A small mesh conversion of the bundled paper scene through dgauss.50mm (48x36,
+    4 samples in batches of 2, into ``tmp_path/out``); ``kw`` changes any option."""
+    from povlens.plan.options import ConvertOptions
+    base = dict(method="mesh", scene=str(ROOT / "scenes" / "paper.pov"), lens="dgauss.50mm",
+                focus=4.0, outdir=str(tmp_path / "out"), width=48, height=36, samples=4,
+                batch_size=2)
+    base.update(kw)
+    return ConvertOptions.of(**base)
+
+
 @pytest.fixture
 def lens_dir():
     return LENS_DIR

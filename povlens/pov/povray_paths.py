@@ -60,11 +60,17 @@ def ascii_alias(path: str | os.PathLike) -> Path:
     real = Path(path).absolute()
     digest = hashlib.sha256(os.fsencode(real)).hexdigest()[:20]
     suffix = real.suffix if readable_by_povray(real.suffix) else ""
-    link = alias_folder() / f"{digest}{suffix}"
-    if not (link.is_symlink() and os.readlink(link) == str(real)):
+    return _linked(alias_folder() / f"{digest}{suffix}", real)
+
+
+def _linked(link: Path, target: Path) -> Path:
+    """``link``, a symbolic link to ``target`` (absolute): left as it is when it already
+    points there, else made under a temporary name and renamed (atomic: concurrent
+    processes never see a half-made or missing link)."""
+    if not (link.is_symlink() and os.readlink(link) == str(target)):
         tmp = link.with_name(f".{link.name}.{os.getpid()}.tmp")
         tmp.unlink(missing_ok=True)
-        os.symlink(real, tmp)
+        os.symlink(target, tmp)
         os.replace(tmp, link)
     return link
 
@@ -87,10 +93,4 @@ def include_text(target: str | os.PathLike, wrapper_dir: str | os.PathLike,
     rel = os.path.relpath(target, wrapper_dir)
     if readable_by_povray(rel):
         return rel
-    link = Path(link)
-    if not (link.is_symlink() and os.readlink(link) == str(Path(target).absolute())):
-        tmp = link.with_name(f".{link.name}.{os.getpid()}.tmp")
-        tmp.unlink(missing_ok=True)
-        os.symlink(Path(target).absolute(), tmp)
-        os.replace(tmp, link)
-    return os.path.relpath(link, wrapper_dir)
+    return os.path.relpath(_linked(Path(link), Path(target).absolute()), wrapper_dir)

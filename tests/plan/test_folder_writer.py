@@ -9,26 +9,19 @@ import subprocess
 import numpy as np
 import pytest
 
-from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.convert import convert
 from povlens.rendering.driver import render_outdir
 from povlens.util.images import read_image
 
-from conftest import ROOT
+from conftest import ROOT, paper_options
 
 SCENES = ROOT / "scenes"
 pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
 
 
-def opts(tmp_path, **kw):
-    base = dict(method="mesh", scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=4.0,
-                outdir=str(tmp_path / "out"), width=48, height=36, samples=4, batch_size=2)
-    base.update(kw)
-    return ConvertOptions.of(**base)
-
-
 def test_convert_writes_plan_wrappers_and_makefile(tmp_path):
     before = (SCENES / "paper.pov").read_bytes()
-    plan = convert(opts(tmp_path))
+    plan = convert(paper_options(tmp_path))
     out = tmp_path / "out"
     for name in ("plan.json", "pinhole.pov", "focal_blur.pov", "Makefile",
                  "samples/batch_000.pov", "samples/batch_001.pov"):
@@ -46,7 +39,7 @@ def test_convert_writes_plan_wrappers_and_makefile(tmp_path):
 
 
 def test_make_renders_and_a_second_make_does_nothing(tmp_path):
-    convert(opts(tmp_path))
+    convert(paper_options(tmp_path))
     out = tmp_path / "out"
     r = subprocess.run(["make", "-C", str(out), "-j2"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
@@ -58,12 +51,12 @@ def test_make_renders_and_a_second_make_does_nothing(tmp_path):
 
 
 def test_changed_inputs_drop_stale_samples_and_exposure(tmp_path):
-    convert(opts(tmp_path, samples=2, batch_size=2))
+    convert(paper_options(tmp_path, samples=2, batch_size=2))
     out = tmp_path / "out"
     render_outdir(out, jobs=1, quiet=True)
     assert (out / "exposure.txt").exists() and (out / "pupil.npz").exists()
     e_f2 = float((out / "exposure.txt").read_text())
-    convert(opts(tmp_path, samples=2, batch_size=2, f_number=4.0))   # the stop changed
+    convert(paper_options(tmp_path, samples=2, batch_size=2, f_number=4.0))   # the stop changed
     assert not (out / "exposure.txt").exists()
     assert not list((out / "samples").glob("sample_*.exr"))
     render_outdir(out, jobs=1, quiet=True)

@@ -3,7 +3,6 @@ POV-Ray renders at 160 x 120 through a strongly dispersive test lens (a plano-co
 singlet of a fictional V_d = 12 glass, the stop 10 mm behind it: ~4 px of lateral
 colour at 0.6 of the field)."""
 
-import dataclasses
 import math
 import os
 import subprocess

@@ -11,21 +11,14 @@ import sys
 import numpy as np
 import pytest
 
-from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.convert import convert
 from povlens.rendering.driver import render_outdir
 from povlens.util.images import read_image
 
-from conftest import ROOT
+from conftest import ROOT, paper_options
 
 SCENES = ROOT / "scenes"
 pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
-
-
-def opts(tmp_path, **kw):
-    base = dict(method="mesh", scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=4.0,
-                outdir=str(tmp_path / "out"), width=48, height=36, samples=4, batch_size=2)
-    base.update(kw)
-    return ConvertOptions.of(**base)
 
 
 def povlens(*args, env=None, cwd=ROOT):
@@ -112,7 +105,7 @@ def test_interrupting_render_stops_povray_and_resumes(tmp_path):
     assert len(done) < 48
     render_outdir(out, quiet=True)
     full = tmp_path / "full"
-    convert(opts(tmp_path, outdir=str(full), samples=48, batch_size=24, method="mesh"))
+    convert(paper_options(tmp_path, outdir=str(full), samples=48, batch_size=24, method="mesh"))
     render_outdir(full, quiet=True)
     np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(full / "image.exr"))
 
@@ -130,7 +123,7 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, l
     from povlens.rendering.driver import convert_and_render
     auto = tmp_path / "auto"
     kw = dict(lens=lens, focus=focus, film_diagonal_mm=film_mm, batch_size=None)
-    plan, _ = convert_and_render(opts(tmp_path, outdir=str(auto), method="auto", samples=None,
+    plan, _ = convert_and_render(paper_options(tmp_path, outdir=str(auto), method="auto", samples=None,
                                       tolerance_px=tol, **kw), quiet=True)
     assert plan.inputs.method == "mesh" and not plan.decision.provisional
     assert any("while the depth probe ran" in r for r in plan.decision.reasons)
@@ -141,7 +134,7 @@ def test_auto_renders_the_first_samples_while_probing_and_keeps_them(tmp_path, l
     assert early["samples"] == n                     # all of them, in the one pipeline
     assert not (auto / "samples" / "render.timing.json").exists()
     fixed = tmp_path / "fixed"
-    convert(opts(tmp_path, outdir=str(fixed), method="mesh", samples=n, **kw))
+    convert(paper_options(tmp_path, outdir=str(fixed), method="mesh", samples=n, **kw))
     render_outdir(fixed, quiet=True)
     np.testing.assert_array_equal(read_image(auto / "image.exr"), read_image(fixed / "image.exr"))
     r = subprocess.run(["make", "-C", str(auto)], capture_output=True, text=True)
@@ -157,7 +150,7 @@ def test_a_wrong_guess_stops_the_early_samples_and_renders_the_decision(tmp_path
     from povlens.rendering.driver import convert_and_render
     monkeypatch.setattr(speculative, "lens_rules_out_views", lambda opts, plan0: True)
     out = tmp_path / "auto"
-    plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto", samples=None,
+    plan, image = convert_and_render(paper_options(tmp_path, outdir=str(out), method="auto", samples=None,
                                           lens="telephoto.250mm", batch_size=None), quiet=True)
     assert plan.inputs.method == "focal-blur"
     assert any("mesh render started while the probe ran was stopped" in r
@@ -179,7 +172,7 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
     from povlens.rendering.driver import convert_and_render
     monkeypatch.setattr(speculative, "early_guess", lambda opts, plan0: "either")
     out = tmp_path / "auto"
-    plan, image = convert_and_render(opts(tmp_path, outdir=str(out), method="auto", samples=None, lens=lens,
+    plan, image = convert_and_render(paper_options(tmp_path, outdir=str(out), method="auto", samples=None, lens=lens,
                                           batch_size=None), quiet=True)
     assert plan.inputs.method == decided
     reasons = " ".join(plan.decision.reasons)
@@ -192,10 +185,10 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
         # plan, written at the same time, must not change the wrapper it renders)
         from povlens.rendering.views import render_view
         plain = tmp_path / "plain"
-        convert(opts(tmp_path, outdir=str(plain), method="auto", samples=None, lens=lens, batch_size=None))
+        convert(paper_options(tmp_path, outdir=str(plain), method="auto", samples=None, lens=lens, batch_size=None))
         render_view(plain, "focal-blur")
         few = tmp_path / "few"
-        convert(opts(tmp_path, outdir=str(few), method="focal-blur", lens=lens, samples=8))
+        convert(paper_options(tmp_path, outdir=str(few), method="focal-blur", lens=lens, samples=8))
         render_view(few, "focal-blur")
         a, b, c = (read_image(p)[..., :3] for p in (image, plain / "image.exr",
                                                      few / "image.exr"))
@@ -208,7 +201,7 @@ def test_an_either_guess_starts_both_and_keeps_the_decided_one(tmp_path, monkeyp
         assert "could rule out the views" in reasons
         assert not (out / "view-focal-blur.exr").exists()
         fixed = tmp_path / "fixed"
-        convert(opts(tmp_path, outdir=str(fixed), method="mesh", lens=lens,
+        convert(paper_options(tmp_path, outdir=str(fixed), method="mesh", lens=lens,
                      samples=plan.inputs.samples, batch_size=None))
         render_outdir(fixed, quiet=True)
         np.testing.assert_array_equal(read_image(image), read_image(fixed / "image.exr"))
@@ -218,7 +211,7 @@ def test_a_cancelled_early_render_leaves_no_povray_and_resumes(tmp_path):
     from povlens.rendering.driver import EarlyRender
     from povlens.rendering.folder_inputs import lens_for, pupil_table_for
     out = tmp_path / "out"
-    plan = convert(opts(tmp_path, samples=24, batch_size=None))
+    plan = convert(paper_options(tmp_path, samples=24, batch_size=None))
     lens = lens_for(plan)
     table = pupil_table_for(out, plan, lens)
     early = EarlyRender(out, plan, lens, table, in_flight=4, quiet=True)
@@ -235,6 +228,6 @@ def test_a_cancelled_early_render_leaves_no_povray_and_resumes(tmp_path):
     assert 0 < len(done) < 24
     render_outdir(out, quiet=True)
     full = tmp_path / "full"
-    convert(opts(tmp_path, outdir=str(full), samples=24, batch_size=None))
+    convert(paper_options(tmp_path, outdir=str(full), samples=24, batch_size=None))
     render_outdir(full, quiet=True)
     np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(full / "image.exr"))

@@ -7,28 +7,20 @@ import shutil
 import numpy as np
 import pytest
 
-from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.convert import convert
 from povlens.plan.schema import read_plan
 from povlens.rendering.driver import render_outdir
 from povlens.rendering.folder_composite import composite_outdir
 from povlens.rendering.views import render_view
 from povlens.util.images import read_image
 
-from conftest import ROOT
+from conftest import paper_options
 
-SCENES = ROOT / "scenes"
 pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
 
 
-def opts(tmp_path, **kw):
-    base = dict(method="mesh", scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=4.0,
-                outdir=str(tmp_path / "out"), width=48, height=36, samples=4, batch_size=2)
-    base.update(kw)
-    return ConvertOptions.of(**base)
-
-
 def test_tiny_stop_mesh_render_matches_the_pinhole_render(tmp_path):
-    o = opts(tmp_path, width=640, height=480, samples=8, batch_size=8, stop_diameter_mm=2.0,
+    o = paper_options(tmp_path, width=640, height=480, samples=8, batch_size=8, stop_diameter_mm=2.0,
              jitter=False)
     convert(o)
     out = tmp_path / "out"
@@ -59,7 +51,7 @@ def test_a_damaged_pass_mask_is_a_clear_error_naming_the_file(tmp_path):
     damaged one stops the composite with the file's name, not a traceback or a
     silently wrong image."""
     from povlens.errors import PovlensError
-    convert(opts(tmp_path, samples=2, batch_size=2))
+    convert(paper_options(tmp_path, samples=2, batch_size=2))
     out = tmp_path / "out"
     render_outdir(out, jobs=2, quiet=True)
     masks = sorted((out / "samples").glob("sample_*.mask.npy"))
@@ -79,7 +71,7 @@ def test_a_damaged_exposure_is_computed_again(tmp_path, text):
     """exposure.txt holding no positive finite number (issue 24 item 5: 'nan', 'inf' or
     '-1' made the image NaN, inf or wrong with exit 0) is computed again: the image
     equals the first composite's, and the file is rewritten."""
-    convert(opts(tmp_path, samples=2, batch_size=2))
+    convert(paper_options(tmp_path, samples=2, batch_size=2))
     out = tmp_path / "out"
     render_outdir(out, jobs=2, quiet=True)
     good = read_image(out / "image.exr")

@@ -7,33 +7,25 @@ import shutil
 import numpy as np
 import pytest
 
-from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.convert import convert
 from povlens.rendering.driver import render_outdir
 from povlens.rendering.folder_composite import composite_outdir
 from povlens.rendering.mesh_samples import render_batch
 from povlens.util.images import read_image
 
-from conftest import ROOT
+from conftest import paper_options
 
-SCENES = ROOT / "scenes"
 pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
-
-
-def opts(tmp_path, **kw):
-    base = dict(method="mesh", scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=4.0,
-                outdir=str(tmp_path / "out"), width=48, height=36, samples=4, batch_size=2)
-    base.update(kw)
-    return ConvertOptions.of(**base)
 
 
 def test_interrupted_render_resumes_to_the_same_image(tmp_path):
     full = tmp_path / "full"
-    convert(opts(tmp_path, outdir=str(full)))
+    convert(paper_options(tmp_path, outdir=str(full)))
     render_outdir(full, jobs=1, quiet=True)
     reference = read_image(full / "image.exr")
 
     part = tmp_path / "part"
-    convert(opts(tmp_path, outdir=str(part)))
+    convert(paper_options(tmp_path, outdir=str(part)))
     render_batch(part, 0)                              # the run stops after one batch ...
     (part / "samples" / "sample_0002.exr").unlink()    # ... and one sample of it is lost
     render_outdir(part, jobs=2, quiet=True)            # re-run
@@ -42,10 +34,10 @@ def test_interrupted_render_resumes_to_the_same_image(tmp_path):
 
 def test_samples_in_flight_render_the_same_image_as_one_at_a_time(tmp_path):
     one = tmp_path / "one"
-    convert(opts(tmp_path, outdir=str(one), samples=6, batch_size=6))
+    convert(paper_options(tmp_path, outdir=str(one), samples=6, batch_size=6))
     render_batch(one, 0, in_flight=1)
     many = tmp_path / "many"
-    convert(opts(tmp_path, outdir=str(many), samples=6, batch_size=6))
+    convert(paper_options(tmp_path, outdir=str(many), samples=6, batch_size=6))
     render_batch(many, 0, in_flight=6)
     rendered = 0
     for k in range(6):
@@ -64,11 +56,11 @@ def test_more_samples_reuse_the_rendered_ones(tmp_path):
     """Raising N keeps samples 0..N-1 (Sobol point k does not depend on N): only the
     new samples are traced and rendered, and the image equals a fresh render."""
     out = tmp_path / "out"
-    convert(opts(tmp_path, samples=3, batch_size=3))
+    convert(paper_options(tmp_path, samples=3, batch_size=3))
     render_outdir(out, jobs=1, quiet=True)
     s = out / "samples"
     before = {k: (s / f"sample_{k:04d}.exr").stat().st_mtime_ns for k in range(3)}
-    convert(opts(tmp_path, samples=5, batch_size=5))
+    convert(paper_options(tmp_path, samples=5, batch_size=5))
     assert not (out / "image.exr").exists()
     assert (out / "exposure.txt").exists()
     rendered = render_batch(out, 0)
@@ -76,9 +68,9 @@ def test_more_samples_reuse_the_rendered_ones(tmp_path):
     assert {k: (s / f"sample_{k:04d}.exr").stat().st_mtime_ns for k in range(3)} == before
     composite_outdir(out)
     fresh = tmp_path / "fresh"
-    convert(opts(tmp_path, outdir=str(fresh), samples=5, batch_size=5))
+    convert(paper_options(tmp_path, outdir=str(fresh), samples=5, batch_size=5))
     render_outdir(fresh, jobs=1, quiet=True)
     np.testing.assert_array_equal(read_image(out / "image.exr"), read_image(fresh / "image.exr"))
     # a change that alters every sample (the seed) drops them all
-    convert(opts(tmp_path, samples=5, batch_size=5, seed=3))
+    convert(paper_options(tmp_path, samples=5, batch_size=5, seed=3))
     assert not list(s.glob("sample_*.exr")) and not (out / "exposure.txt").exists()

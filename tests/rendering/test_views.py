@@ -6,26 +6,18 @@ import numpy as np
 import pytest
 
 from povlens.errors import ParameterError
-from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.convert import convert
 from povlens.rendering.driver import render_outdir
 from povlens.rendering.views import render_view
 from povlens.util.images import read_image
 
-from conftest import ROOT
+from conftest import paper_options
 
-SCENES = ROOT / "scenes"
 pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
 
 
-def opts(tmp_path, **kw):
-    base = dict(method="mesh", scene=str(SCENES / "paper.pov"), lens="dgauss.50mm", focus=4.0,
-                outdir=str(tmp_path / "out"), width=48, height=36, samples=4, batch_size=2)
-    base.update(kw)
-    return ConvertOptions.of(**base)
-
-
 def test_focal_blur_method_renders_one_image(tmp_path):
-    convert(opts(tmp_path, method="focal-blur", samples=7))
+    convert(paper_options(tmp_path, method="focal-blur", samples=7))
     out = tmp_path / "out"
     render_outdir(out, quiet=True)
     img = read_image(out / "image.exr")
@@ -34,7 +26,7 @@ def test_focal_blur_method_renders_one_image(tmp_path):
 
 
 def test_a_view_is_kept_as_povray_rendered_it_and_rendered_once(tmp_path):
-    convert(opts(tmp_path, method="pinhole"))
+    convert(paper_options(tmp_path, method="pinhole"))
     out = tmp_path / "out"
     view = render_view(out, "pinhole")
     assert view == out / "view-pinhole.exr" and (out / "image.exr").exists()
