@@ -26,7 +26,11 @@ from povlens.plan.options import ConvertOptions
 from povlens.pov.sdl import ASPECT_TOLERANCE, parse_scene_camera
 
 __all__ = ["scene_camera_of", "camera_focus", "camera_basis", "focus_of", "film_of",
-           "camera_notes", "off_axis_direction", "vector_tuple"]
+           "camera_notes", "framing_note", "off_axis_direction", "vector_tuple"]
+
+#: The lens's field of view may differ from the scene camera's by this fraction (of
+#: tan(hfov/2)) without a note: a film-diagonal rounding, not another framing.
+FRAMING_TOLERANCE = 0.02
 
 
 def _unit(v) -> np.ndarray:
@@ -207,6 +211,49 @@ def camera_notes(cam, proportions_note: str | None = None) -> list[str]:
     notes = [] if cam is None else [n for n in getattr(cam, "replaced", ())
                                     if not n.startswith(_READER_PROPORTIONS_NOTE)]
     return notes + ([proportions_note] if proportions_note else [])
+
+
+def framing_note(cam, film: Film, image_distance_mm: float, lens_name: str) -> str | None:
+    """A note when the lens frames the scene otherwise than its own camera did.
+
+    Parameters
+    ----------
+    cam : the scene camera (:class:`~povlens.pov.sdl.SceneCamera`), or None.
+    film : the film of the conversion.
+    image_distance_mm : float
+        The thin-lens model's image distance: the film's width over it is the
+        lens's horizontal field, as the pinhole and focal_blur cameras use it.
+    lens_name : str
+        How the note names the lens.
+
+    Returns
+    -------
+    str or None
+        None when the scene's camera is not a perspective one, or when the fields
+        agree within :data:`FRAMING_TOLERANCE`.  Otherwise the two fields of view and
+        the film diagonal that frames the scene about as its author did (about: the
+        thin-lens model is fitted over the film, so its image distance changes a
+        little with the film's size, more for a lens used beyond its image circle).
+        A picture with another field of view has other content, so its mean, its
+        highlights and its look are not the scene camera's, whatever the gamma.
+    """
+    hfov = None if cam is None else getattr(cam, "hfov_deg", None)
+    if hfov is None or not 0.0 < hfov < 180.0:
+        return None
+    scene_half = math.tan(math.radians(hfov) / 2.0)
+    lens_half = 0.5 * film.width_mm / image_distance_mm
+    if abs(lens_half / scene_half - 1.0) <= FRAMING_TOLERANCE:
+        return None
+    diagonal_mm = 2.0 * film.half_diagonal_mm
+    matching = diagonal_mm * scene_half / lens_half
+    lens_hfov = math.degrees(2.0 * math.atan(lens_half))
+    tighter = lens_half < scene_half
+    focal = "shorter" if tighter else "longer"
+    return (f"the scene's camera ({cam.source}) sees {hfov:.1f} deg across, {lens_name} on "
+            f"this {diagonal_mm:.4g} mm film {lens_hfov:.1f} deg: the picture is framed "
+            f"{'tighter' if tighter else 'wider'} than the author's; a film diagonal of about "
+            f"{matching:.3g} mm (--film-diagonal), or a lens of {focal} focal length, frames "
+            f"it as the scene's camera does")
 
 
 def focus_of(opts: ConvertOptions, cam) -> tuple[float, str]:

@@ -22,7 +22,8 @@ from povlens.lens.paraxial import paraxial_data, stopped_down
 from povlens.lens.prescription import LensPrescription, read_lens
 from povlens.plan.aperture import shape_of_options
 from povlens.plan.camera_setup import (camera_basis, camera_notes, film_of, focus_of,
-                                       off_axis_direction, scene_camera_of, vector_tuple)
+                                       framing_note, off_axis_direction, scene_camera_of,
+                                       vector_tuple)
 from povlens.plan.options import ConvertOptions, povray_options_of
 from povlens.plan.schema import PovrayCamera
 from povlens.pov.povray_options import PovrayOptions
@@ -133,4 +134,13 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
         hfov_deg=math.degrees(2 * math.atan(0.5 * film.width_mm / model.image_distance_mm)))
     return PlanStart(mm_per_unit, lens, p, film, focus_mm, film_d, object_d, thick_d, spot,
                      model, loc, right, up, fwd, cam_source, camera, focus, focus_from,
-                     povray, camera_notes(cam, proportions))
+                     povray, camera_notes(cam, proportions) + _framing(cam, film, model, opts))
+
+
+def _framing(cam, film, model, opts) -> list[str]:
+    """:func:`framing_note` as a list (empty when the fields agree or the film is given:
+    a film size or lens shift the user chose frames as the user means)."""
+    if opts.film.film_size_mm is not None or opts.film.shift_mm is not None:
+        return []
+    note = framing_note(cam, film, model.image_distance_mm, Path(str(opts.lens)).name)
+    return [] if note is None else [note]
