@@ -5,17 +5,20 @@ stored under its absolute path on the client (without the leading ``/``):
 
 * the render folder's ``plan.json``, ``pupil.npz`` and wrappers (``*.pov``,
   ``samples/*.pov``);
-* the lens file;
+* the scene file and the lens file;
 * the scene's folder tree (its ``#include`` files and image maps, which POV-Ray finds
   through the scene folder's ``+L``) and the tree of each ``library_paths`` folder,
-  leaving out render folders (a folder with a ``plan.json``), ``.git`` and caches.
+  leaving out hidden entries (names starting with ``.``), render folders (a folder
+  with a ``plan.json``) and caches; links travel as the content they lead to
+  (:mod:`povlens.cluster.scene_files`), so the bundle holds only files and folders.
 
 On the worker it is unpacked once per machine into ``<tmp>/povlens-cluster/<key>/``
-(the *replica*), so every relative path (the wrappers' ``#include`` of the scene is
-relative to the render folder) is as on the client; the replica's ``plan.json`` is
-rewritten to name the replica's scene, lens and library folders.  The client's end
-deletes the replicas (:func:`remove_replica`); one whose end never came (a killed
-worker) is deleted once stale (:func:`prune_stale_replicas`).
+(the *replica*; every member checked first: :mod:`povlens.cluster.safe_tar`), so
+every relative path (the wrappers' ``#include`` of the scene is relative to the render
+folder) is as on the client; the replica's ``plan.json`` is rewritten to name the
+replica's scene, lens and library folders.  The client's end deletes the replicas
+(:func:`remove_replica`, which deletes only a folder named by a bundle key); one whose
+end never came (a killed worker) is deleted once stale (:func:`prune_stale_replicas`).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import hashlib
 import io
 import json
 import os
+import re
 import shutil
 import tarfile
 import tempfile
@@ -31,37 +35,24 @@ import threading
 import time
 from pathlib import Path
 
+from povlens.cluster.safe_tar import extract_checked
+from povlens.cluster.scene_files import SceneFiles
 from povlens.errors import ParameterError, PovlensError
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 
-__all__ = ["BUNDLE_LIMIT_BYTES", "make_bundle", "replica_root", "in_replica", "remove_replica",
-           "prune_stale_replicas", "STALE_REPLICA_S"]
+__all__ = ["BUNDLE_LIMIT_BYTES", "make_bundle", "bundle_files", "replica_root", "in_replica",
+           "remove_replica", "is_bundle_key", "replica_base", "prune_stale_replicas",
+           "STALE_REPLICA_S"]
 
 #: Largest bundle sent (bytes, before compression); past it the render asks for
 #: ``shared_dir`` or a scene folder of its own.
 BUNDLE_LIMIT_BYTES = 512 * 1024 * 1024
 
-#: Folder names never sent.
-_SKIP_DIRS = {".git", "__pycache__", ".hg", ".svn", ".pytest_cache"}
-
 #: The bundle's member naming the client's absolute scene, lens and library paths.
 _PATHS = "povlens-paths.json"
 
 _lock = threading.Lock()
-
-
-def _tree_files(folder: Path, outdir: Path) -> list[Path]:
-    """Files under ``folder``, leaving out render folders (``outdir`` and any folder
-    holding a ``plan.json``) and version-control folders."""
-    files = []
-    for top, dirs, names in os.walk(folder):
-        top_path = Path(top)
-        dirs[:] = sorted(d for d in dirs if d not in _SKIP_DIRS
-                         and (top_path / d).resolve() != outdir.resolve()
-                         and not RenderFolder(top_path / d).plan_json.exists())
-        files += [top_path / n for n in sorted(names) if (top_path / n).is_file()]
-    return files
 
 
 def _render_folder_files(outdir: Path) -> list[Path]:
@@ -73,51 +64,75 @@ def _render_folder_files(outdir: Path) -> list[Path]:
     return files
 
 
-def make_bundle(outdir: str | os.PathLike, plan: Plan) -> tuple[str, bytes]:
-    """Pack the files a worker needs to render lens samples of ``outdir``.
-
-    Parameters
-    ----------
-    outdir : the render folder (converted; its pupil table built).
-    plan : its plan.
-
-    Returns
-    -------
-    key : str
-        SHA-256 of the bundle (hex): the name of the replica on the workers.
-    data : bytes
-        The gzip-compressed tar.
+def bundle_files(outdir: str | os.PathLike, plan: Plan) -> SceneFiles:
+    """The files :func:`make_bundle` packs: ``.files`` {name on the client: file read},
+    ``.size_bytes`` (before compression).
 
     Raises
     ------
     ParameterError
-        ``shared_dir``: the files are larger than :data:`BUNDLE_LIMIT_BYTES`.
+        ``shared_dir``: the files are larger than :data:`BUNDLE_LIMIT_BYTES`, or a
+        link in a folder leads to a hidden file (:mod:`povlens.cluster.scene_files`).
     """
     # absolute, not resolved: the wrappers' relative #include of the scene was
     # computed lexically from these paths (os.path.relpath)
     outdir = Path(os.path.abspath(outdir))
     inp = plan.inputs
     scene_dir = Path(os.path.abspath(inp.scene)).parent
-    files = _render_folder_files(outdir) + [Path(os.path.abspath(inp.lens))]
-    for folder in [scene_dir, *(Path(os.path.abspath(p)) for p in inp.library_paths)]:
-        files += _tree_files(folder, outdir)
-    files = list(dict.fromkeys(files))
-    size = sum(p.stat().st_size for p in files)
-    if size > BUNDLE_LIMIT_BYTES:
-        raise ParameterError(
+
+    def too_big(size: int) -> ParameterError:
+        return ParameterError(
             "shared_dir", False,
             f"the scene folder {scene_dir} (and the render folder, lens and library "
-            f"folders) hold {size / 1e6:.0f} MB: more than the "
+            f"folders) hold {size / 1e6:.0f} MB or more: more than the "
             f"{BUNDLE_LIMIT_BYTES / 1e6:.0f} MB povlens sends to the workers",
             "put the scene and what it reads in a folder of its own, or give "
             "'shared_dir' when the workers see these files at the same paths")
+
+    files = SceneFiles(outdir, BUNDLE_LIMIT_BYTES, too_big)
+    for p in _render_folder_files(outdir) + [Path(os.path.abspath(inp.scene)),
+                                             Path(os.path.abspath(inp.lens))]:
+        files.add_file(p)
+    for folder in [scene_dir, *(Path(os.path.abspath(p)) for p in inp.library_paths)]:
+        files.add_tree(folder)
+    return files
+
+
+def make_bundle(outdir: str | os.PathLike, plan: Plan,
+                files: SceneFiles | None = None) -> tuple[str, bytes]:
+    """Pack the files a worker needs to render lens samples of ``outdir``.
+
+    Parameters
+    ----------
+    outdir : the render folder (converted; its pupil table built).
+    plan : its plan.
+    files : :func:`bundle_files` of them (default: found here).
+
+    Returns
+    -------
+    key : str
+        SHA-256 of the bundle (hex): the name of the replica on the workers.
+    data : bytes
+        The gzip-compressed tar: regular files and folders only.
+
+    Raises
+    ------
+    ParameterError
+        As :func:`bundle_files`.
+    """
+    if files is None:
+        files = bundle_files(outdir, plan)
+    inp = plan.inputs
     # the client's absolute paths, for the replica's plan (_rewrite_plan)
     paths = json.dumps({"scene": os.path.abspath(inp.scene), "lens": os.path.abspath(inp.lens),
                         "library_paths": [os.path.abspath(p) for p in inp.library_paths]})
     buf = io.BytesIO()
     with tarfile.open(fileobj=buf, mode="w:gz", compresslevel=1) as tar:
-        for p in files:
-            tar.add(p, arcname=str(p).lstrip("/"), recursive=False)
+        for name, source in files.files.items():
+            # the content of the file the name leads to, stored as a regular file
+            info = tar.gettarinfo(source, arcname=str(name).lstrip("/"))
+            with open(source, "rb") as f:
+                tar.addfile(info, f)
         info = tarfile.TarInfo(_PATHS)
         info.size = len(paths.encode())
         tar.addfile(info, io.BytesIO(paths.encode()))
@@ -158,8 +173,8 @@ def replica_root(key: str, data: bytes, outdir: str) -> Path:
         ``<tmp>/povlens-cluster/<key>``: unpacked into a temporary folder and renamed,
         so worker processes sharing the machine never see half a replica.
     """
-    base = Path(tempfile.gettempdir()) / "povlens-cluster"
-    root = base / key
+    root = _replica_dir(key)
+    base = root.parent
     with _lock:
         if root.is_dir():
             _touch(root)                 # in use: not stale (prune_stale_replicas)
@@ -168,11 +183,13 @@ def replica_root(key: str, data: bytes, outdir: str) -> Path:
         prune_stale_replicas(base)
         tmp = Path(tempfile.mkdtemp(prefix=f".{key[:12]}.", dir=base))
         try:
-            with tarfile.open(fileobj=io.BytesIO(data), mode="r:gz") as tar:
-                if hasattr(tarfile, "data_filter"):
-                    tar.extractall(tmp, filter="data")
-                else:                                   # Python < 3.11.4
-                    tar.extractall(tmp)
+            try:
+                tar = tarfile.open(fileobj=io.BytesIO(data), mode="r:gz")
+            except (tarfile.TarError, EOFError, OSError) as e:
+                raise PovlensError(f"the bundle {key[:12]} cannot be read ({e})",
+                                   "render again") from None
+            with tar:
+                extract_checked(tar, tmp, f"the bundle {key[:12]}")
             _rewrite_plan(tmp, root, outdir)
             try:
                 os.rename(tmp, root)
@@ -219,10 +236,35 @@ def prune_stale_replicas(base: Path, now: float | None = None) -> list[Path]:
     return gone
 
 
+def is_bundle_key(key: str) -> bool:
+    """Whether ``key`` names a replica: a SHA-256 in hex (:func:`make_bundle`)."""
+    return isinstance(key, str) and re.fullmatch(r"[0-9a-f]{64}", key) is not None
+
+
+def replica_base() -> Path:
+    """The folder of this machine's replicas: ``<tmp>/povlens-cluster``."""
+    return Path(tempfile.gettempdir()) / "povlens-cluster"
+
+
+def _replica_dir(key: str) -> Path:
+    """The replica folder of bundle ``key``; anything but a bundle key (``../x``, a
+    path) is refused, so no folder outside :func:`replica_base` is ever named."""
+    if not is_bundle_key(key):
+        raise PovlensError(f"{key!r} is not a bundle key (64 hex digits): no replica has "
+                           f"that name, and nothing outside {replica_base()} is touched",
+                           "pass the key make_bundle returned")
+    return replica_base() / key
+
+
 def remove_replica(key: str) -> bool:
     """Delete this machine's replica of bundle ``key`` (the client's render ended);
-    returns whether there was one.  A later task of the same bundle unpacks it again."""
-    root = Path(tempfile.gettempdir()) / "povlens-cluster" / key
+    returns whether there was one.  A later task of the same bundle unpacks it again.
+
+    Raises
+    ------
+    PovlensError
+        ``key`` is not a bundle key (nothing deleted)."""
+    root = _replica_dir(key)
     with _lock:
         if not root.is_dir():
             return False

@@ -13,8 +13,15 @@ workers or the order groups finish in.  With group size 1 a task is one sample
 (:func:`~povlens.cluster.worker.render_sample`), its files come back, and the image is
 the local one bit for bit.  A worker that dies loses its groups in flight; the
 scheduler runs them again on another worker.  An interrupted render resumes from the
-groups and samples on disk, locally or on a cluster.  When the render ends, the
-workers delete their copies of the bundle.
+groups and samples on disk, locally or on a cluster.  When the render ends (done, failed
+or interrupted), the workers stop its tasks still running, POV-Ray processes killed,
+and delete their copies of the bundle (:func:`~povlens.cluster.worker.forget_render`;
+at most :data:`FORGET_TIMEOUT_S`).
+
+The scheduler's address may be ``tcp://`` or ``tls://``; a ``tls://`` scheduler is
+reached with Dask's own TLS configuration (``distributed.comm.tls.*`` in the Dask
+config files or ``DASK_DISTRIBUTED__COMM__TLS__...`` variables), or the ``security``
+of the ``Client`` or cluster object given.
 """
 
 from __future__ import annotations
@@ -26,8 +33,9 @@ import time
 import uuid
 from pathlib import Path
 
-from povlens.cluster.bundle import make_bundle
-from povlens.cluster.worker import forget_render, render_group, render_sample
+from povlens.cluster.bundle import bundle_files, make_bundle
+from povlens.cluster.running import STOP_WAIT_S
+from povlens.cluster.worker import forget_render_async, render_group, render_sample
 from povlens.errors import ParameterError, PovlensError, PovrayError
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.options import SCHEDULER_ENV_VAR, DaskOptions
@@ -56,6 +64,16 @@ WORKER_WAIT_S = 600.0
 #: full disk, say).  A worker that dies does not count: the scheduler reschedules its
 #: tasks by itself (up to Dask's ``distributed.scheduler.allowed-failures``).
 RETRIES = 3
+#: Seconds the client waits for the workers to stop a render's tasks and delete its
+#: replica (:func:`~povlens.cluster.worker.forget_render`); a worker slower than
+#: that cleans up by itself.
+FORGET_TIMEOUT_S = STOP_WAIT_S + 10.0
+#: How to start a scheduler, as the hints say it: listening on an address of the
+#: user's choice (without ``--host``, ``dask scheduler`` listens on every interface and
+#: anyone who reaches the port can run code on the workers).
+START_SCHEDULER = ("'dask scheduler --host HOST' (HOST: 127.0.0.1 on one machine, else "
+                   "an address on a network only your machines reach; tls:// with "
+                   "--tls-ca-file/--tls-cert/--tls-key elsewhere)")
 
 
 def scheduler_address(scheduler: str | None) -> str | None:
@@ -63,8 +81,10 @@ def scheduler_address(scheduler: str | None) -> str | None:
     return scheduler or os.environ.get(ENV_VAR) or None
 
 
-def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
-    """A ``distributed.Client`` of the scheduler at ``address``.
+def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S, security=None):
+    """A ``distributed.Client`` of the scheduler at ``address``; ``security`` (a
+    ``distributed.Security``) as the Client takes it, None: Dask's configuration
+    (``distributed.comm.tls.*``).
 
     Raises
     ------
@@ -87,17 +107,19 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
     except ValueError as e:                 # checked here: Client would hang, then warn
         raise ParameterError("scheduler", address,
                              f"scheduler={address}: not a scheduler address ({e})",
-                             "write it as tcp://HOST:PORT (Dask's default port is 8786)"
-                             ) from None
+                             "write it as tcp://HOST:PORT or tls://HOST:PORT (Dask's "
+                             "default port is 8786)") from None
     try:
-        return Client(address, timeout=f"{float(timeout_s)}s", set_as_default=False)
+        return Client(address, timeout=f"{float(timeout_s)}s", set_as_default=False,
+                      security=security)
     except (OSError, TimeoutError, ValueError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise ParameterError(
             "scheduler", address,
             f"scheduler={address}: no Dask scheduler answered within {timeout_s:g} s "
             f"({reason})",
-            "start one ('dask scheduler') and give its address (tcp://HOST:8786), or "
+            f"start one with {START_SCHEDULER} and give its address (tcp://HOST:8786); "
+            "for a tls:// scheduler, set Dask's distributed.comm.tls configuration; or "
             "leave out 'scheduler' to render on this machine") from None
 
 
@@ -112,8 +134,8 @@ def _wait_for_workers(client, worker_wait_s: float) -> None:
     except TimeoutError:
         raise PovlensError(f"no Dask worker joined the scheduler {client.scheduler.address} "
                            f"within {worker_wait_s:g} s",
-                           "start workers ('dask worker ADDRESS') with POV-Ray and povlens "
-                           "installed") from None
+                           "start workers ('dask worker ADDRESS --host HOST') with POV-Ray "
+                           "and povlens installed") from None
 
 
 def _submit(client, job: dict, groups: list[list[int]], group_size: int) -> list:
@@ -190,11 +212,14 @@ def _collect(client, futures, outdir: Path, shared: bool, on_sample, bar,
 
 
 def _forget(client, key: str) -> None:
-    """Delete the workers' replicas of bundle ``key`` (the render is over: no task of
-    it runs again).  A worker that does not answer keeps its copy (in its $TMPDIR)."""
+    """Stop the workers' tasks of render ``key`` still running (cancelling does not
+    stop a running task; their POV-Ray processes are killed) and delete their
+    replicas, waiting at most :data:`FORGET_TIMEOUT_S`.  A worker that does not answer
+    keeps its copy (in its $TMPDIR) until it is stale."""
     try:
-        client.run(forget_render, key, on_error="ignore")
-    except Exception:           # a worker gone, a client closing: nothing to clean
+        client.sync(client._run, forget_render_async, key, on_error="ignore",
+                    callback_timeout=FORGET_TIMEOUT_S)
+    except Exception:           # a worker gone, a client closing, the wait over
         pass
 
 
@@ -208,8 +233,9 @@ def _client_of(scheduler, timeout_s: float):
         return connect(scheduler.strip(), timeout_s), True
     if hasattr(scheduler, "submit"):
         return scheduler, False
-    if hasattr(scheduler, "scheduler_address"):
-        return connect(scheduler.scheduler_address, timeout_s), True
+    if hasattr(scheduler, "scheduler_address"):     # a cluster: its TLS settings too
+        return connect(scheduler.scheduler_address, timeout_s,
+                       security=getattr(scheduler, "security", None)), True
     raise ParameterError("scheduler", scheduler,
                          f"scheduler={scheduler!r}: not an address, a Dask client or a cluster",
                          "give the scheduler's address, tcp://HOST:8786")
@@ -299,8 +325,23 @@ def _job(outdir: Path, plan, shared_dir: bool) -> dict:
     if shared_dir:
         return {"outdir": str(outdir), "key": f"shared-{uuid.uuid4().hex}",
                 "bundle": None, "shared": True}
-    key, data = make_bundle(outdir, plan)
-    return {"outdir": str(outdir), "key": key, "bundle": data, "shared": False}
+    files = bundle_files(outdir, plan)
+    key, data = make_bundle(outdir, plan, files)
+    return {"outdir": str(outdir), "key": key, "bundle": data, "shared": False,
+            "files": len(files.files), "input_bytes": files.size_bytes}
+
+
+#: A bundle this large (bytes, before compression) is reported on stderr.
+NOTE_BUNDLE_BYTES = 16 * 1024 * 1024
+
+
+def _note_bundle(job: dict, plan, quiet: bool) -> None:
+    """Say how much is sent to the workers when it is large (not when ``quiet``)."""
+    size = job.get("input_bytes", 0)
+    if not quiet and size >= NOTE_BUNDLE_BYTES:
+        print(f"povlens: sending {job['files']} files ({size / 1e6:.0f} MB) of "
+              f"{Path(plan.inputs.scene).parent} and the render folder to the workers "
+              f"(hidden files left out)", file=sys.stderr)
 
 
 def _render_on(client, outdir: Path, plan, lens, table, done: list, todo: list[int],
@@ -319,7 +360,9 @@ def _render_on(client, outdir: Path, plan, lens, table, done: list, todo: list[i
         groups = chunk_groups(todo, size)
         job = _job(outdir, plan, shared_dir)
         stats.update(bundle_bytes=len(job["bundle"] or b""), group_size=size,
-                     groups=len(groups))
+                     groups=len(groups), bundle_files=job.get("files", 0),
+                     bundle_input_bytes=job.get("input_bytes", 0))
+        _note_bundle(job, plan, quiet)
         futures = _submit(client, job, groups, size)
         stats["scatter_s"] = time.perf_counter() - t0 - stats["connect_s"]
         stats["workers"] = len(client.nthreads())

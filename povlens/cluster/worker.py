@@ -9,19 +9,25 @@ one machine, in the worker's replica of the render folder
 pass mask or weights, blocked marker) as bytes.  A sample is fixed by the plan (seed,
 sample number), so where and in which order samples render does not change them.
 
+Each task is recorded while it runs (:func:`povlens.cluster.running.task_running`), so
+:func:`forget_render` (the client's render ended) first stops its POV-Ray processes and
+waits for it, a bounded time, and only then deletes the replica they work in.
+
 Dask is imported only to ask the worker its thread count: the worker imports this module
 by name when it unpickles the task.
 """
 
 from __future__ import annotations
 
+import asyncio
 import os
 import socket
 import threading
 import time
 from pathlib import Path
 
-from povlens.cluster.bundle import in_replica, remove_replica, replica_root
+from povlens.cluster.bundle import in_replica, is_bundle_key, remove_replica, replica_root
+from povlens.cluster.running import stop_tasks, task_running
 from povlens.errors import PovlensError
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import read_plan
@@ -30,7 +36,7 @@ from povlens.rendering.folder_inputs import lens_for, pupil_table_for
 from povlens.rendering.groups import GroupSums, pack_group
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, render_samples
 
-__all__ = ["render_sample", "render_group", "forget_render"]
+__all__ = ["render_sample", "render_group", "forget_render", "forget_render_async"]
 
 #: Render folder key -> (plan, lens, pupil table): read once per worker process.
 _loaded: dict[str, tuple] = {}
@@ -72,37 +78,12 @@ def _run(job: dict, ks: list[int], group: bool) -> dict:
             outdir = in_replica(replica_root(job["key"], job["bundle"], job["outdir"]),
                                 job["outdir"])
         t_unpack = time.perf_counter() - t0
-        plan, lens, table = _load(job["key"] + ("-shared" if job["shared"] else ""), outdir)
-        folder = RenderFolder(outdir)
-        if not job["shared"]:
-            for k in ks:         # an earlier attempt's, on this machine
-                for p in folder.sample_outputs(k):
-                    p.unlink(missing_ok=True)
-        in_flight = job.get("in_flight") or _in_flight()
-        # the group's partial sums, each sample added here in sample order as soon as
-        # it is rendered, while the group's other POV-Ray processes run
-        sums = GroupSums(ks, lambda k: sample_sums(outdir, k, plan, table))
-        t_sums = 0.0
-
-        def add_ready():
-            nonlocal t_sums
-            t = time.perf_counter()
-            sums.ready(folder.sample_done)
-            t_sums += time.perf_counter() - t
-
-        timing = render_samples(plan, lens, table, outdir, 0, ks,
-                                in_flight=in_flight if group else 1,
-                                on_done=add_ready if group else None)
-        files = {}
-        if group:
-            add_ready()
-            files["group"] = pack_group(ks, *sums.result())
-        if not job["shared"]:
-            for k in ks:
-                for p in folder.sample_outputs(k):
-                    if not group:
-                        files[p.name] = p.read_bytes()
-                    p.unlink(missing_ok=True)
+        with task_running(job["key"], outdir) as stop:
+            files, timing, t_sums, in_flight = _render(job, outdir, ks, group, stop)
+        if stop.is_set():           # the render ended meanwhile: nobody waits for this
+            return {"k": ks[0], "ks": ks, "host": host,
+                    "error": {"type": "PovlensError", "hint": None,
+                              "message": "stopped: the client's render ended"}}
     except PovlensError as e:
         return {"k": ks[0], "ks": ks, "host": host,
                 "error": {"type": type(e).__name__, "message": e.message, "hint": e.hint}}
@@ -111,6 +92,46 @@ def _run(job: dict, ks: list[int], group: bool) -> dict:
                        "povray_s": timing["povray_s"], "sums_s": t_sums,
                        "in_flight": in_flight if group else 1,
                        "task_s": time.perf_counter() - t0}}
+
+
+def _render(job: dict, outdir: Path, ks: list[int], group: bool, stop: threading.Event):
+    """Render samples ``ks`` in ``outdir`` (the replica's render folder, or the
+    client's when shared) until done or ``stop`` is set: (files, timing, seconds of
+    partial sums, POV-Ray processes in flight)."""
+    plan, lens, table = _load(job["key"] + ("-shared" if job["shared"] else ""), outdir)
+    folder = RenderFolder(outdir)
+    if not job["shared"]:
+        for k in ks:         # an earlier attempt's, on this machine
+            for p in folder.sample_outputs(k):
+                p.unlink(missing_ok=True)
+    in_flight = job.get("in_flight") or _in_flight()
+    # the group's partial sums, each sample added here in sample order as soon as
+    # it is rendered, while the group's other POV-Ray processes run
+    sums = GroupSums(ks, lambda k: sample_sums(outdir, k, plan, table))
+    t_sums = 0.0
+
+    def add_ready():
+        nonlocal t_sums
+        t = time.perf_counter()
+        sums.ready(folder.sample_done)
+        t_sums += time.perf_counter() - t
+
+    timing = render_samples(plan, lens, table, outdir, 0, ks,
+                            in_flight=in_flight if group else 1,
+                            on_done=add_ready if group else None, stop=stop)
+    files = {}
+    if stop.is_set():
+        return files, timing, t_sums, in_flight
+    if group:
+        add_ready()
+        files["group"] = pack_group(ks, *sums.result())
+    if not job["shared"]:
+        for k in ks:
+            for p in folder.sample_outputs(k):
+                if not group:
+                    files[p.name] = p.read_bytes()
+                p.unlink(missing_ok=True)
+    return files, timing, t_sums, in_flight
 
 
 def render_sample(job: dict, k: int) -> dict:
@@ -155,11 +176,29 @@ def render_group(job: dict, ks: list[int]) -> dict:
     return _run(job, [int(k) for k in ks], group=True)
 
 
-def forget_render(key: str) -> bool:
-    """Delete this machine's replica of bundle ``key`` and this process's loaded plan
-    (run on every worker when the client's render ends).  Returns whether a replica
-    was deleted."""
-    with _loaded_lock:
-        _loaded.pop(key, None)
-        _loaded.pop(key + "-shared", None)
-    return remove_replica(key)
+def forget_render(key: str) -> dict:
+    """Stop this process's tasks of the render ``key`` (their POV-Ray processes
+    killed: :func:`povlens.cluster.running.stop_tasks`, every wait bounded), then
+    delete this machine's replica of bundle ``key`` and this process's loaded plan
+    (run on every worker when the client's render ends).
+
+    Returns
+    -------
+    dict
+        ``tasks`` stopped, ``killed`` POV-Ray processes, ``left`` tasks still running
+        after the wait (the last of them deletes the replica when it ends).
+    """
+    def cleanup():
+        with _loaded_lock:
+            _loaded.pop(key, None)
+            _loaded.pop(key + "-shared", None)
+        if is_bundle_key(key):          # "shared-...": no replica
+            remove_replica(key)
+
+    return stop_tasks(key, cleanup)
+
+
+async def forget_render_async(key: str) -> dict:
+    """:func:`forget_render` in a thread of its own, so the worker's event loop (which
+    runs what ``Client.run`` sends) keeps answering the scheduler meanwhile."""
+    return await asyncio.get_running_loop().run_in_executor(None, forget_render, key)
