@@ -26,11 +26,13 @@ from povlens.plan.options import ConvertOptions
 from povlens.pov.sdl import ASPECT_TOLERANCE, parse_scene_camera
 
 __all__ = ["scene_camera_of", "camera_focus", "camera_basis", "focus_of", "film_of",
-           "camera_notes", "framing_note", "off_axis_direction", "vector_tuple"]
+           "camera_notes", "framing_note", "FRAMING_NOTE_START", "off_axis_direction", "vector_tuple"]
 
 #: The lens's field of view may differ from the scene camera's by this fraction (of
 #: tan(hfov/2)) without a note: a film-diagonal rounding, not another framing.
 FRAMING_TOLERANCE = 0.02
+#: How :func:`framing_note` begins.
+FRAMING_NOTE_START = "the scene's camera ("
 
 
 def _unit(v) -> np.ndarray:
@@ -249,7 +251,7 @@ def framing_note(cam, film: Film, image_distance_mm: float, lens_name: str) -> s
     lens_hfov = math.degrees(2.0 * math.atan(lens_half))
     tighter = lens_half < scene_half
     focal = "shorter" if tighter else "longer"
-    return (f"the scene's camera ({cam.source}) sees {hfov:.1f} deg across, {lens_name} on "
+    return (f"{FRAMING_NOTE_START}{cam.source}) sees {hfov:.1f} deg across, {lens_name} on "
             f"this {diagonal_mm:.4g} mm film {lens_hfov:.1f} deg: the picture is framed "
             f"{'tighter' if tighter else 'wider'} than the author's; a film diagonal of about "
             f"{matching:.3g} mm (--film-diagonal), or a lens of {focal} focal length, frames "

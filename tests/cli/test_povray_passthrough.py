@@ -237,7 +237,7 @@ def test_notes_print_once_on_stderr_and_not_with_quiet(tmp_path):
         notes = notes_of(r.stderr)
         pinhole = [n for n in notes if "method pinhole:" in n]   # its model error: not measured
         assert len(pinhole) == (command != "plan"), (command, r.stderr)
-        notes = [n for n in notes if n not in pinhole]
+        notes = [n for n in notes if n not in pinhole and "sees 67.2 deg across" not in n]
         assert len(notes) == 1 and "focal blur" in notes[0], (command, r.stderr)
         assert "note:" not in r.stdout.replace('"notes"', "")
     r = povlens("render", *base, "--method", "pinhole", "-q", "-o", tmp_path / "q")

@@ -22,6 +22,7 @@ import pytest
 from povlens.errors import PovlensError, PovrayError
 from povlens.lens.film import Film
 from povlens.plan.auto import measure_depth_map, probe_size, start_depth_probe
+from povlens.plan.camera_setup import FRAMING_NOTE_START
 from povlens.plan.convert import ConvertOptions, convert, make_plan
 from povlens.plan.depth_probe import (FADE_POWER, ProbeView, axial_depth, depth_limits,
                                       distance_from_fade, probe_depth, ray_directions,
@@ -285,7 +286,7 @@ def test_plan_auto_succeeds_on_a_backdrop_scene(tmp_path):
     assert 13900 < n["far_distance_mm"] < 14100               # the backdrop (14 m)
     rec = plan["depth_probe"]
     assert rec["depth_range"]["no_depth_pixels"] == 0 and "light fade" in rec["method"]
-    assert "notes" not in plan                                 # the scene has no fog/media
+    assert all(n.startswith(FRAMING_NOTE_START) for n in plan.get("notes", []))  # no fog
     assert not list(out.glob(".probe.*"))
 
 
@@ -301,8 +302,10 @@ def test_the_scenes_own_fog_and_media_are_noted_once(tmp_path):
     a, b = (p.decision.numbers for p in plans.values())
     assert a["near_distance_mm"] == b["near_distance_mm"]
     assert a["far_distance_mm"] == b["far_distance_mm"]
-    assert plans["plain"].notes == []
-    (note,) = plans["fog"].notes
+    scene_notes = {k: [n for n in p.notes if not n.startswith(FRAMING_NOTE_START)]
+                   for k, p in plans.items()}
+    assert scene_notes["plain"] == []
+    (note,) = scene_notes["fog"]
     assert "fog" in note and "does not see" in note
     text = (tmp_path / "fog" / "out" / "plan.json").read_text()
     assert text.count("does not see") == 1

@@ -10,6 +10,7 @@ import shutil
 import numpy as np
 import pytest
 
+from povlens.plan.camera_setup import FRAMING_NOTE_START
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.plan_finish import PINHOLE_NOTE, make_plan
 from povlens.pov.process import render as povray_render
@@ -31,8 +32,10 @@ def scene(tmp_path, camera: str, body: str = BODY, name: str = "s.pov"):
 
 
 def scene_notes(plan):
-    """The plan's notes on the scene: without the note every pinhole plan has."""
-    return [n for n in plan.notes if n != PINHOLE_NOTE]
+    """The plan's notes on the scene: without the note every pinhole plan has and the
+    framing note (tests/plan/test_scene_look.py) of a lens that frames otherwise."""
+    return [n for n in plan.notes
+            if n != PINHOLE_NOTE and not n.startswith(FRAMING_NOTE_START)]
 
 
 def plan_of(tmp_path, camera: str, body: str = BODY, **kw):
@@ -43,8 +46,11 @@ def plan_of(tmp_path, camera: str, body: str = BODY, **kw):
 
 
 def test_a_plain_perspective_camera_has_no_notes_and_plan_json_no_notes_key(tmp_path):
-    plan = plan_of(tmp_path, "location <0, 1, -4> look_at <0, 1, 0> "
-                             "right x*image_width/image_height", method="focal-blur")
+    camera = "location <0, 1, -4> look_at <0, 1, 0> right x*image_width/image_height"
+    plan = plan_of(tmp_path, camera, method="focal-blur")
+    assert [n for n in plan.notes if n.startswith(FRAMING_NOTE_START)] == plan.notes
+    # the scene's camera with the lens's field of view: nothing to note
+    plan = plan_of(tmp_path, f"angle {plan.povray_camera.hfov_deg} " + camera, method="focal-blur")
     assert plan.notes == []
     assert "notes" not in plan.to_dict()
 
@@ -89,7 +95,7 @@ def test_camera_proportions_set_the_film_as_povray_does(tmp_path):
     assert math.hypot(film.width_mm, film.height_mm) == pytest.approx(35.0)
     cam = plan.povray_camera
     assert np.linalg.norm(cam.right) / np.linalg.norm(cam.up) == pytest.approx(4 / 3)
-    notes = [n for n in plan.notes if "proportions" in n]
+    notes = [n for n in scene_notes(plan) if "proportions" in n]
     assert len(notes) == 1 and "as POV-Ray does" in notes[0], plan.notes  # one, povlens's
     # proportions within 1 % (right x*1.33) keep the image's, with square pixels
     plan = plan_of(tmp_path, "location <0, 1, -4> look_at <0, 1, 0> right 1.33*x up y")
@@ -101,7 +107,7 @@ def test_film_size_keeps_its_own_proportions_and_says_so(tmp_path):
     plan = plan_of(tmp_path, "location <0, 1, -4> look_at <0, 1, 0> right 2*x up y",
                    film_size_mm=(36.0, 27.0))
     assert (plan.film.width_mm, plan.film.height_mm) == (36.0, 27.0)
-    notes = [n for n in plan.notes if "proportions" in n]
+    notes = [n for n in scene_notes(plan) if "proportions" in n]
     assert len(notes) == 1 and "film_size_mm=36,27" in notes[0], plan.notes
 
 
@@ -144,7 +150,7 @@ def test_the_scene_fog_is_noted_when_the_depth_probe_ran(tmp_path):
                 width=32, height=24, method="pinhole")
     probed = convert(ConvertOptions.of(**opts, focus=None, focus_at=(16, 12),
                                     outdir=str(tmp_path / "probed")))
-    fog = [n for n in probed.notes if "fog" in n]
+    fog = [n for n in scene_notes(probed) if "fog" in n]
     assert len(fog) == 1 and "depth probe does not see it" in fog[0], probed.notes
     assert probed.depth_probe is not None
     plain = convert(ConvertOptions.of(**opts, focus=4.0, outdir=str(tmp_path / "plain")))
