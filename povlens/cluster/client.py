@@ -109,10 +109,12 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S, security=None):
                              f"scheduler={address}: not a scheduler address ({e})",
                              "write it as tcp://HOST:PORT or tls://HOST:PORT (Dask's "
                              "default port is 8786)") from None
+    if scheme == "tls":
+        _check_tls(address, security)
     try:
         return Client(address, timeout=f"{float(timeout_s)}s", set_as_default=False,
                       security=security)
-    except (OSError, TimeoutError, ValueError) as e:
+    except (OSError, TimeoutError, ValueError, TypeError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise ParameterError(
             "scheduler", address,
@@ -121,6 +123,36 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S, security=None):
             f"start one with {START_SCHEDULER} and give its address (tcp://HOST:8786); "
             "for a tls:// scheduler, set Dask's distributed.comm.tls configuration; or "
             "leave out 'scheduler' to render on this machine") from None
+
+
+#: The Dask configuration a tls:// scheduler needs on the client, as variables.
+TLS_VARIABLES = ("DASK_DISTRIBUTED__COMM__TLS__CA_FILE", "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT",
+                 "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY")
+
+
+def _check_tls(address: str, security) -> None:
+    """A ``tls://`` scheduler needs the client's TLS settings: ``security``, else
+    Dask's configuration (``distributed.comm.tls.ca-file``, ``client.cert``,
+    ``client.key``).  Without them ``distributed.Client`` fails with a TypeError
+    about an SSL context; say what is missing instead."""
+    from distributed.security import Security
+    try:
+        sec = security if security is not None else Security()
+        context = sec.get_connection_args("client").get("ssl_context")
+    except (OSError, ValueError) as e:      # a certificate file missing or unreadable
+        raise ParameterError("scheduler", address,
+                             f"scheduler={address}: the TLS configuration cannot be used "
+                             f"({e})",
+                             "check the files Dask's distributed.comm.tls settings name"
+                             ) from None
+    if context is None:
+        raise ParameterError(
+            "scheduler", address,
+            f"scheduler={address}: a tls:// scheduler, but Dask has no TLS configuration "
+            f"for this client (distributed.comm.tls.ca-file, client.cert, client.key)",
+            f"set {', '.join(TLS_VARIABLES)} (or distributed.comm.tls in "
+            f"~/.config/dask/distributed.yaml) to the CA file, certificate and key the "
+            f"scheduler was started with")
 
 
 def _raise_task_error(err: dict, k: int, host: str) -> None:
