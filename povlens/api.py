@@ -19,6 +19,7 @@ from povlens.lens.focus import LENS_SIDE_UNITS, UNITS_MM, FocusResult, focus as 
 from povlens.lens.prescription import LensPrescription, read_lens as read_lens_file
 from povlens.errors import ParameterError
 from povlens.plan.convert import convert as convert_options
+from povlens.plan.folder_lock import folder_lock
 from povlens.plan.focus_series import FocusPull, focus_series, parse_focus
 from povlens.plan.options import SCHEDULER_ENV_VAR, ConvertOptions, DaskOptions
 from povlens.plan.render_folder import FramesFolder, RenderFolder
@@ -154,7 +155,9 @@ def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | 
     ParameterError
         An unknown option, or a value its option refuses; names the option.
     """
-    return convert_options(_options(scene, lens, outdir, focus, options))
+    opts = _options(scene, lens, outdir, focus, options)
+    with folder_lock(outdir):       # one writer per render folder (waits for another)
+        return convert_options(opts)
 
 
 def convert_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
@@ -266,7 +269,8 @@ def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | o
     opts = _options(scene, lens, outdir, focus, options)
     if renderer is None:
         renderer = renderer_for(scheduler, shared_dir, group_size, scheduler_timeout_s, jobs)
-    plan, exr = renderer.render(opts, quiet=not progress, on_plan=on_plan)
+    with folder_lock(outdir):       # one writer per render folder (waits for another)
+        plan, exr = renderer.render(opts, quiet=not progress, on_plan=on_plan)
     exr = Path(exr)
     return RenderResult(plan, exr, exr.with_suffix(".png"))
 
@@ -356,7 +360,8 @@ def render_view(outdir: str | os.PathLike, view: str) -> Path:
     """Render the ``"pinhole"`` or ``"focal-blur"`` view of a converted folder (what
     ``make`` runs); returns its image's path."""
     from povlens.rendering.views import render_view as render_folder_view
-    return render_folder_view(outdir, view)
+    with folder_lock(outdir):       # one writer per render folder (waits for another)
+        return render_folder_view(outdir, view)
 
 
 def composite(outdir: str | os.PathLike, vignetting: bool | None = None) -> np.ndarray:

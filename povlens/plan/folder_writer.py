@@ -100,7 +100,9 @@ def _makefile(plan: Plan) -> str:
     image, plan_json = names["image_png"], names["plan_json"]
     if method == "mesh":
         rules = (f"{image}: {names['batch_dones']}\n\t$(POVLENS) composite .\n\n"
-                 f"{names['batch_done_rule']}: {plan_json}\n\t$(POVLENS) render-batch . $*\n")
+                 f"{names['batch_done_rule']}: {plan_json}\n\t$(POVLENS) render-batch . $*\n\n"
+                 + "".join(f"{done}: $(if $(call povlens_gone,{done}),FORCE)\n"
+                           for done in names["batch_dones"].split()))
     else:
         wrapper = VIEWS["pinhole" if method == "pinhole" else "focal-blur"]
         rules = (f"{image}: {plan_json} {wrapper}\n"

@@ -14,7 +14,9 @@ A render folder (``povlens convert -o OUTDIR``) holds
 ``illumination.json``                     the relative illumination of a field-mesh composite
 ``image.exr``, ``image.png``              the image (linear float; sRGB preview)
 ``samples/batch_BBB.pov``                 the mesh method's batch wrappers
-``samples/batch_BBB.done``                make's marker: batch b is rendered
+``samples/batch_BBB.done``                make's marker: batch b is rendered (its samples' files)
+``samples/batch_BBB.lock``                its lock while ``povlens render-batch`` renders it
+``.povlens.lock``                         the folder's lock (:mod:`povlens.plan.folder_lock`)
 ``samples/sample_KKKK.exr``               lens sample k as POV-Ray rendered it
 ``samples/sample_KKKK.weight.exr``        its per-pixel radiometric weights (per-pixel meshes)
 ``samples/sample_KKKK.mask.npy``          its pass mask (field meshes, bits packed by row)
@@ -67,6 +69,7 @@ _IMAGE, _WEIGHT, _MASK, _TRANSMISSION, _BLOCKED, _MESH = (
 #: A file being written (renamed to its final name when complete).
 _PART = ".part"
 _TIMING = ".timing.json"
+_LOCK = ".lock"
 _SPECULATIVE = ".speculative-focal-blur"
 
 
@@ -133,6 +136,12 @@ class RenderFolder:
     @property
     def makefile(self) -> Path:
         return self.path / _MAKEFILE
+
+    @property
+    def lock_file(self) -> Path:
+        """The folder's lock (:mod:`povlens.plan.folder_lock`): it stays when released,
+        empty or naming its last exclusive holder."""
+        return self.path / (".povlens" + _LOCK)
 
     def wrapper(self, view: str) -> Path:
         """The wrapper of ``view`` (``pinhole`` or ``focal-blur``, :data:`VIEWS`)."""
@@ -219,12 +228,79 @@ class RenderFolder:
                       if p.is_file() and not p.name.endswith((_MESH, _PART)))
 
     def sample_done(self, k: int) -> bool:
-        """Whether lens sample k is rendered: its weights (or pass mask: field meshes)
-        exist, and its image or the marker that it has none (all its rays blocked);
-        or a group file covers it."""
-        return ((self.sample_weight(k).exists() or self.sample_mask(k).exists())
-                and (self.sample_image(k).exists() or self.sample_blocked(k).exists())
-                ) or self.grouped(k)
+        """Whether lens sample k is rendered: its weights (or a readable pass mask: field
+        meshes) exist, and its image or a trusted marker that it has none
+        (:meth:`blocked`); or a group file covers it."""
+        weights = self.sample_weight(k).exists() or (
+            self.sample_mask(k).exists() and self._load_mask(k)[1] is None)
+        return ((weights and (self.sample_image(k).exists() or self.blocked(k)))
+                or self.grouped(k))
+
+    def blocked(self, k: int) -> bool:
+        """Whether sample k is rendered as blocked (black, weight 0): its marker exists
+        and agrees with its files (no image; a pass mask that passes nothing, or
+        weights all 0).  A marker that disagrees is not trusted
+        (:meth:`sample_damage` says why)."""
+        return (self.sample_blocked(k).exists() and not self.sample_image(k).exists()
+                and self._blocked_disagrees(k) is None)
+
+    def sample_damage(self, k: int) -> tuple[Path, str] | None:
+        """The damaged file of sample k and what is wrong with it, or None: a pass mask
+        that cannot be read, a blocked marker that disagrees with the sample's files.
+        (Its images are checked when they are read: :func:`povlens.util.images.read_image`.)"""
+        if self.sample_mask(k).exists():
+            why = self._load_mask(k)[1]
+            if why is not None:
+                return self.sample_mask(k), why
+        marker = self.sample_blocked(k)
+        if marker.exists() and not self.sample_image(k).exists():
+            why = self._blocked_disagrees(k)
+            if why is not None:
+                return marker, why
+        return None
+
+    def redo_hint(self, k: int) -> str:
+        """What to do about a damaged file of sample k: delete the sample's files and
+        render again (``make`` renders a batch again when a file its marker lists
+        is gone)."""
+        return (f"delete {self.samples / _sample_name(k, '.*')} and render again "
+                f"('povlens render' with the same options, or 'make -C {self.path}')")
+
+    def _load_mask(self, k: int) -> tuple[np.ndarray | None, str | None]:
+        """Sample k's packed pass mask, or None and why it cannot be read."""
+        try:
+            packed = np.load(self.sample_mask(k), allow_pickle=False)
+        except (OSError, ValueError, EOFError) as e:
+            return None, f"cannot read the sample's pass mask ({e or type(e).__name__})"
+        if packed.dtype != np.uint8 or packed.ndim != 2:
+            return None, (f"holds a {packed.dtype} array of shape {packed.shape}, not a "
+                          f"pass mask")
+        return packed, None
+
+    def _blocked_disagrees(self, k: int) -> str | None:
+        """Why sample k's blocked marker is not to be trusted, None if it agrees: it
+        names its rows ``R0 R1``, and its pass mask passes nothing (or its weights
+        are 0)."""
+        marker = self.sample_blocked(k)
+        try:
+            r0, r1 = (int(v) for v in marker.read_text().split())
+        except (OSError, ValueError):
+            return "does not hold the rows 'R0 R1' it was made for"
+        if self.sample_mask(k).exists():
+            packed, why = self._load_mask(k)
+            if packed is None:
+                return f"its pass mask {self.sample_mask(k).name} {why}"
+            passing = int(np.unpackbits(packed).sum())
+            return (None if passing == 0 else f"says every ray of rows {r0}..{r1} is "
+                    f"blocked, but its pass mask passes {passing} pixels")
+        if self.sample_weight(k).exists():
+            try:
+                passing = int(np.count_nonzero(self.read_weight(k) > 0))
+            except PovlensError as e:
+                return f"its weights cannot be read ({e.message})"
+            return (None if passing == 0 else f"says every ray of rows {r0}..{r1} is "
+                    f"blocked, but its weights are above 0 at {passing} pixels")
+        return "has neither the sample's pass mask nor its weights beside it"
 
     def batch_wrapper(self, b: int) -> Path:
         """The wrapper of batch b (:mod:`povlens.data` ``mesh_batch.pov.tmpl``)."""
@@ -235,8 +311,22 @@ class RenderFolder:
         return self.samples / _batch_name(b, ".done")
 
     def mark_batch_done(self, b: int, ks) -> None:
-        """Write :meth:`batch_done` of batch b, whose samples are ``ks``."""
-        write_text(self.batch_done(b), "".join(f"{k}\n" for k in ks))
+        """Write :meth:`batch_done` of batch b, whose samples are ``ks``: the files they
+        are made of (relative to the folder, one a line; a group file for samples a
+        group covers), so that ``make`` renders the batch again when one is gone
+        (the Makefile reads them: :meth:`makefile_names`)."""
+        groups = self.group_files()
+        names = set()
+        for k in ks:
+            covering = [p for k0, k1, p in groups if k0 <= k < k1]
+            names.update(covering or self.sample_outputs(k))
+        write_text(self.batch_done(b), "".join(
+            f"{p.relative_to(self.path).as_posix()}\n" for p in sorted(names)))
+
+    def batch_lock(self, b: int) -> Path:
+        """Batch b's lock, held while ``povlens render-batch`` renders it
+        (:func:`povlens.plan.folder_lock.batch_lock`)."""
+        return self.samples / _batch_name(b, _LOCK)
 
     def batch_timing(self, b: int) -> Path:
         """The timings of ``povlens render-batch`` of batch b."""
@@ -359,16 +449,13 @@ class RenderFolder:
             what to delete.
         """
         path = self.sample_mask(k)
-        redo = f"delete it and {self.sample_image(k).name}, then render again"
-        try:
-            packed = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as e:
-            raise PovlensError(f"{path}: cannot read the sample's pass mask ({e})",
-                               redo) from None
+        packed, why = self._load_mask(k)
+        if packed is None:
+            raise PovlensError(f"{path}: {why}", self.redo_hint(k))
         passed = np.unpackbits(packed, axis=1, count=width).astype(bool)
         if passed.shape != (height, width):
             raise PovlensError(f"{path} holds a {passed.shape} mask, not the film's "
-                               f"{(height, width)}", redo)
+                               f"{(height, width)}", self.redo_hint(k))
         return passed
 
     def write_transmission(self, k: int, transmission: np.ndarray) -> None:
@@ -384,11 +471,16 @@ class RenderFolder:
         """
         path = self.sample_transmission(k)
         try:
-            return np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as e:
-            raise PovlensError(f"{path}: cannot read the sample's mask transmission ({e})",
-                               f"delete {self.sample_mask(k).name} and "
-                               f"{self.sample_image(k).name}, then render again") from None
+            transmission = np.load(path, allow_pickle=False)
+        except (OSError, ValueError, EOFError) as e:
+            raise PovlensError(f"{path}: cannot read the sample's mask transmission "
+                               f"({e or type(e).__name__})", self.redo_hint(k)) from None
+        if (transmission.ndim != 2 or transmission.dtype.kind != "f"
+                or not np.all(np.isfinite(transmission))):
+            raise PovlensError(f"{path} holds a {transmission.dtype} array of shape "
+                               f"{transmission.shape} (or values not finite), not the "
+                               f"sample's mask transmission", self.redo_hint(k))
+        return transmission
 
 
 class FramesFolder:

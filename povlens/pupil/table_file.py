@@ -4,13 +4,17 @@ It holds the table's arrays (knot radii, frames, vertex distances), the lens
 prescription (so a table can be used without its lens file) and a JSON
 metadata string (format and version, lens hash, stop, film distance, focus,
 film, tolerance, plane, build statistics).  Reading checks the format, the
-version and the lens against its hash.
+version, the lens against its hash and that every number is finite, so a damaged
+file is refused (and a render folder's ``pupil.npz`` built again:
+:func:`povlens.pupil.storage.load_if_current`).
 """
 
 from __future__ import annotations
 
 import io
 import json
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -78,7 +82,8 @@ def read_table_file(path, make):
     UsageError
         If the file is missing or a directory.
     PovlensError
-        If it is not a povlens pupil table of this version.
+        If it is not a povlens pupil table of this version, or is damaged (truncated,
+        or a NaN or infinite value in an array).
     """
     path = Path(path)
     try:
@@ -88,9 +93,12 @@ def read_table_file(path, make):
         raise UsageError(f"{path}: no such pupil table") from None
     except IsADirectoryError:
         raise UsageError(f"{path}: is a directory, not a pupil table") from None
-    except (OSError, ValueError, EOFError) as e:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
         raise PovlensError(f"{path}: not a povlens pupil table ({e})") from None
     try:
+        bad = [k for k, a in arrays.items() if a.dtype.kind == "f" and not np.all(np.isfinite(a))]
+        if bad:
+            raise ValueError(f"NaN or infinite values in {', '.join(bad)}")
         meta = json.loads(str(arrays["metadata"]))
         if meta.get("format") != FORMAT_NAME or meta.get("version") != FORMAT_VERSION:
             raise ValueError("unknown format or version")

@@ -78,7 +78,7 @@ def accumulate_samples(
 
 def _cropped_image(path, drop: int, right: int, transform) -> np.ndarray:
     """Sample image ``path`` without its ``drop`` top rows and ``right`` right columns,
-    then ``transform``-ed (when given)."""
+    then ``transform``-ed (when given); refused if a value is NaN or infinite."""
     img = read_image(path)
     if img.shape[0] <= drop:
         raise PovlensError(
@@ -88,6 +88,11 @@ def _cropped_image(path, drop: int, right: int, transform) -> np.ndarray:
         raise PovlensError(
             f"image {path} has only {img.shape[1]} columns; cannot drop {right} column(s)")
     img = img[drop:, :img.shape[1] - right]
+    if not np.all(np.isfinite(img)):        # a damaged file: no NaN reaches an image
+        raise PovlensError(f"image {path} has {np.count_nonzero(~np.isfinite(img))} values "
+                           f"that are NaN or infinite",
+                           "the file is damaged; delete it and render again "
+                           "('povlens render' or 'make' in the folder)")
     if transform is not None:
         img = transform(img)
     return img

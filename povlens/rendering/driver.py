@@ -21,6 +21,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from povlens.plan.convert import ConvertOptions, convert
+from povlens.plan.folder_lock import folder_lock
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, read_plan
 from povlens.rendering.folder_composite import composite_outdir
@@ -49,8 +50,16 @@ def render_outdir(outdir: str | os.PathLike, jobs: int | None = None, quiet: boo
     with the lens and pupil table in memory is faster than a worker process per
     batch: a worker's Python start-up costs more than the tracing it would share
     (docs/decisions/planning.md).  ``make -jN`` in the folder renders its batches
-    in parallel processes (``povlens render-batch``)."""
-    outdir = Path(outdir)
+    in parallel processes (``povlens render-batch``).  It holds the folder's lock
+    (:func:`povlens.plan.folder_lock.folder_lock`): another render of the folder, or
+    make's recipes, wait for it."""
+    with folder_lock(outdir):       # one writer: waits for another render of the folder
+        return _render_locked(Path(outdir), jobs, quiet, in_flight)
+
+
+def _render_locked(outdir: Path, jobs: int | None, quiet: bool,
+                   in_flight: int | None) -> Path:
+    """:func:`render_outdir` with the folder's lock held."""
     folder = RenderFolder(outdir)
     plan = read_plan(outdir)
     method = plan.inputs.method
@@ -174,15 +183,17 @@ def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: boo
     focal_blur view, or, when the lens alone rules out the views, the first lens
     samples of the mesh render (``render_early``).  ``on_plan(plan)`` is called
     between conversion and rendering; ``depth_probe`` goes to ``convert`` (a focus
-    pull's frames share one probe).  Returns (plan, path of image.exr)."""
+    pull's frames share one probe).  Returns (plan, path of image.exr).  The folder's
+    lock is held throughout (:func:`povlens.plan.folder_lock.folder_lock`)."""
     jobs = jobs or os.cpu_count() or 1
 
     def render_early(plan, lens, table):
         return EarlyRender(Path(opts.outdir), plan, lens, table, POVRAY_IN_FLIGHT * jobs,
                            quiet)
 
-    plan = convert(opts.replace(speculate=True), render_early=render_early,
-                   depth_probe=depth_probe)
-    if on_plan is not None:
-        on_plan(plan)
-    return plan, render_outdir(opts.outdir, jobs=jobs, quiet=quiet)
+    with folder_lock(opts.outdir):  # one writer from the conversion to the image
+        plan = convert(opts.replace(speculate=True), render_early=render_early,
+                       depth_probe=depth_probe)
+        if on_plan is not None:
+            on_plan(plan)
+        return plan, render_outdir(opts.outdir, jobs=jobs, quiet=quiet)

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from povlens.errors import PovlensError
+from povlens.plan.folder_lock import folder_lock
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, read_plan
 from povlens.rendering.composite import accumulate_samples, measurement_image
@@ -81,8 +82,29 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
     Returns the (H, W, 3) float64 image; ``write=False`` only returns it.  ``sums``:
     the sums over the rendered samples, added in sample order by the caller as they
     came (:func:`sample_sums`; :mod:`povlens.cluster`), instead of reading them here.
+    The folder's lock is held shared (:func:`povlens.plan.folder_lock.folder_lock`):
+    beside make's recipes, but not while ``povlens render`` writes the folder.
     """
-    outdir = Path(outdir)
+    with folder_lock(outdir, shared=True):  # beside make's recipes; not under a render
+        image = _composite(Path(outdir), vignetting, sums)
+        if write:
+            write_image(outdir, image.astype(np.float32))
+    return image
+
+
+def _refuse_missing(folder: RenderFolder, missing: list[int]) -> None:
+    """Raise for samples not rendered: the first damaged file among them by name, or
+    which are missing."""
+    for k in missing:
+        damage = folder.sample_damage(k)
+        if damage is not None:
+            raise PovlensError(f"{damage[0]}: {damage[1]}", folder.redo_hint(k))
+    raise PovlensError(f"{folder.path}: samples {missing[:8]}{'...' if len(missing) > 8 else ''} "
+                       f"are not rendered yet", "run 'povlens render' or 'make' in the folder")
+
+
+def _composite(outdir: Path, vignetting: bool | None, sums) -> np.ndarray:
+    """:func:`composite_outdir`'s image, not written."""
     folder = RenderFolder(outdir)
     plan = read_plan(outdir)
     if vignetting is None:
@@ -91,8 +113,7 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
     drop = plan.povray.drop_top_rows
     missing = [k for k in range(n) if not folder.sample_done(k)]
     if missing:
-        raise PovlensError(f"{outdir}: samples {missing[:8]}{'...' if len(missing) > 8 else ''} "
-                           f"are not rendered yet", "run 'povlens render' or 'make' in the folder")
+        _refuse_missing(folder, missing)
     lens = lens_for(plan)
     table = pupil_table_for(outdir, plan, lens)
     exposure = exposure_for(outdir, plan, lens, table)
@@ -100,25 +121,27 @@ def composite_outdir(outdir: str | os.PathLike, vignetting: bool | None = None,
     # Blocked samples (all rays blocked) are black with weight 0: they add nothing to
     # the sums but count in N_p.  Adaptive plans: sample k covers only its rows
     # (weight 0 elsewhere) and pixel p's N_p counts the samples covering its row.
-    rendered = [k for k in range(n) if not folder.sample_blocked(k).exists()]
+    rendered = [k for k in range(n) if not folder.blocked(k)]
     film = plan.film
     n_p = samples_per_pixel(plan).astype(np.float64)
     if not rendered:
-        image = np.zeros((film.height_px, film.width_px, 3))
-    else:
-        paths = [folder.sample_image(k) for k in rendered]
-        # sum w I / sum w, in float64, one sample in memory at a time (composite.py);
-        # times sum w / N_p for the measurement
-        spectral = plan_channel_factors(plan)    # --dispersion: per-channel weights
-        total, wsum = sums if sums is not None else accumulate_samples(
-            paths, (sample_weight(outdir, k, plan, table) for k in rendered),
-            drop_top_rows=drop, drop_right_columns=plan.povray.drop_right_columns,
-            channel_weights=None if spectral is None else spectral[rendered],
-            transform=image_layout(plan))
-        ri = illumination_map(outdir, plan, table) if vignetting else None   # field meshes
-        image = measurement_image(total, wsum, n_p, exposure if vignetting else None, ri)
-    if write:
-        write_image(outdir, image.astype(np.float32))
+        return np.zeros((film.height_px, film.width_px, 3))
+    paths = [folder.sample_image(k) for k in rendered]
+    # sum w I / sum w, in float64, one sample in memory at a time (composite.py);
+    # times sum w / N_p for the measurement
+    spectral = plan_channel_factors(plan)    # --dispersion: per-channel weights
+    total, wsum = sums if sums is not None else accumulate_samples(
+        paths, (sample_weight(outdir, k, plan, table) for k in rendered),
+        drop_top_rows=drop, drop_right_columns=plan.povray.drop_right_columns,
+        channel_weights=None if spectral is None else spectral[rendered],
+        transform=image_layout(plan))
+    ri = illumination_map(outdir, plan, table) if vignetting else None   # field meshes
+    image = measurement_image(total, wsum, n_p, exposure if vignetting else None, ri)
+    bad = np.count_nonzero(~np.isfinite(image))
+    if bad:     # every input is checked when read: this is povlens's own fault
+        raise PovlensError(f"{outdir}: the composite has {bad} values that are NaN or "
+                           f"infinite; no image was written",
+                           "this is a bug in povlens; please report it with the folder")
     return image
 
 
@@ -126,7 +149,7 @@ def sample_sums(outdir: str | os.PathLike, k: int, plan: Plan, table):
     """Sample k's terms of :func:`composite_outdir`'s sums (float64 ``w_k I_k``, ``w_k``),
     None if blocked; added in sample order they are its sums bit for bit."""
     folder = RenderFolder(outdir)
-    if folder.sample_blocked(k).exists():
+    if folder.blocked(k):
         return None
     spectral = plan_channel_factors(plan)
     return accumulate_samples(

@@ -33,6 +33,8 @@ from __future__ import annotations
 import io
 import math
 import os
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +46,11 @@ from povlens.util.files import write_bytes
 __all__ = ["GROUP_MAX", "render_units", "chunk_groups", "choose_group_size", "GroupSums",
            "group_terms", "pack_group", "write_group", "load_group", "UnitSums", "unit_terms",
            "group_sums"]
+
+#: What to do about a damaged group file (``make`` renders a batch again when a file
+#: its marker lists is gone).
+_GROUP_REDO = ("delete it and render again ('povlens render' with the same options, or "
+               "'make' in the folder): its samples render again")
 
 #: Largest automatic group (samples): past it a dead worker loses too much work and
 #: the slowest group ends the render late.
@@ -166,23 +173,32 @@ def write_group(outdir: str | os.PathLike, ks: list[int], data: bytes) -> Path:
     return write_bytes(RenderFolder(outdir).group_file(ks[0], ks[-1] + 1), data)
 
 
-def load_group(path: str | os.PathLike):
+def load_group(path: str | os.PathLike, shape: tuple[int, int] | None = None):
     """A group file's sums as float64 (``total``, ``wsum``), or None if every sample
-    of it was blocked.
+    of it was blocked.  ``shape``: the film's (H, W), which the sums must have.
 
     Raises
     ------
     PovlensError
-        The file is not a group file (damaged): names it and says to delete it.
+        The file is not a group file, or not of the film's size, or holds NaN or
+        infinite values (damaged): names it and says to delete it.
     """
     try:
         with np.load(path, allow_pickle=False) as z:
             if "total" not in z.files:
                 return None
-            return z["total"].astype(np.float64), z["wsum"].astype(np.float64)
-    except (OSError, ValueError, KeyError, EOFError) as e:
+            total, wsum = z["total"].astype(np.float64), z["wsum"].astype(np.float64)
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as e:
         raise PovlensError(f"{path}: cannot read the group's partial sums ({e})",
-                           "delete it and render again (its samples render again)") from None
+                           _GROUP_REDO) from None
+    if shape is not None and (total.shape != tuple(shape) + (3,)
+                              or wsum.shape[:2] != tuple(shape)):
+        raise PovlensError(f"{path}: partial sums of {total.shape[:2]} pixels, not the "
+                           f"film's {tuple(shape)}", _GROUP_REDO)
+    if not (np.all(np.isfinite(total)) and np.all(np.isfinite(wsum))):
+        raise PovlensError(f"{path}: the group's partial sums hold NaN or infinite values",
+                           _GROUP_REDO)
+    return total, wsum
 
 
 class UnitSums:
@@ -224,7 +240,7 @@ def unit_terms(outdir: str | os.PathLike, plan, table, sample_sums):
     def terms(k0: int, k1: int):
         path = RenderFolder(outdir).group_file(k0, k1)
         if path.exists():
-            return load_group(path)
+            return load_group(path, (plan.film.height_px, plan.film.width_px))
         return sample_sums(outdir, k0, plan, table)
     return terms
 

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from povlens.errors import PovlensError, PovrayError
+from povlens.plan.folder_lock import batch_lock, folder_lock
 from povlens.plan.options import povray_options_of
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, PovraySettings, read_plan
@@ -75,6 +76,7 @@ def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
     """
     folder = RenderFolder(outdir)
     inc = folder.sample_mesh(k)
+    folder.sample_blocked(k).unlink(missing_ok=True)    # one of an earlier render: stale
     if plan.field_mesh is not None:
         if points is not None:
             raise PovlensError("field-mesh samples share one pupil point per sample: "
@@ -306,24 +308,31 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
 
 def render_batch(outdir: str | os.PathLike, batch: int,
                  in_flight: int = POVRAY_IN_FLIGHT) -> list[int]:
-    """Render batch ``batch`` of a mesh plan; returns the samples it rendered (resumes)."""
+    """Render batch ``batch`` of a mesh plan; returns the samples it rendered (resumes).
+
+    It holds the folder's lock shared and the batch's own lock
+    (:func:`povlens.plan.folder_lock.batch_lock`): ``make -jN`` runs batches side by
+    side, and waits while ``povlens render`` or ``convert`` writes the folder."""
     outdir = Path(outdir)
-    plan = read_plan(outdir)
-    if plan.inputs.method != "mesh":
-        raise PovlensError(f"{outdir} was converted with the {plan.inputs.method} "
-                           f"method; it has no sample batches", "use 'povlens render-view'")
-    batches = plan.batches
-    if not 0 <= batch < len(batches):
-        raise PovlensError(f"batch {batch}: {outdir} has batches 0..{len(batches) - 1}")
-    folder = RenderFolder(outdir)
-    todo = [k for k in batches[batch] if not folder.sample_done(k)]
-    if todo:
-        lens = lens_for(plan)
-        table = pupil_table_for(outdir, plan, lens)
-        exposure_for(outdir, plan, lens, table)
-        timing = render_samples(plan, lens, table, outdir, batch, todo, in_flight=in_flight)
-        write_text(folder.batch_timing(batch), json.dumps(timing) + "\n")
-    folder.mark_batch_done(batch, batches[batch])
+    with folder_lock(outdir, shared=True):      # the plan as no other writer changes it
+        plan = read_plan(outdir)
+        if plan.inputs.method != "mesh":
+            raise PovlensError(f"{outdir} was converted with the {plan.inputs.method} "
+                               f"method; it has no sample batches", "use 'povlens render-view'")
+        batches = plan.batches
+        if not 0 <= batch < len(batches):
+            raise PovlensError(f"batch {batch}: {outdir} has batches 0..{len(batches) - 1}")
+        folder = RenderFolder(outdir)
+        with batch_lock(outdir, batch):     # make's recipes share the folder, one per batch
+            todo = [k for k in batches[batch] if not folder.sample_done(k)]
+            if todo:
+                lens = lens_for(plan)
+                table = pupil_table_for(outdir, plan, lens)
+                exposure_for(outdir, plan, lens, table)
+                timing = render_samples(plan, lens, table, outdir, batch, todo,
+                                        in_flight=in_flight)
+                write_text(folder.batch_timing(batch), json.dumps(timing) + "\n")
+            folder.mark_batch_done(batch, batches[batch])
     return todo
 
 

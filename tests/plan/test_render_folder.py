@@ -10,6 +10,7 @@ import pytest
 from povlens.errors import PovlensError
 from povlens.plan.render_folder import VIEWS, FramesFolder, RenderFolder
 from povlens.pov.sdl import read_template
+from povlens.util.images import write_exr
 
 
 def test_the_names_are_those_render_folders_have():
@@ -57,14 +58,36 @@ def test_a_sample_is_done_with_its_weights_and_image_or_blocked_marker(tmp_path)
     f.sample_weight(0).write_bytes(b"")
     assert not f.sample_done(0)                      # weights without an image
     f.sample_blocked(0).write_text("0 4\n")
-    assert f.sample_done(0)
+    assert not f.sample_done(0)                      # a marker its weights cannot confirm
+    write_exr(f.sample_weight(0), np.zeros((4, 3, 1), np.float32))
+    assert f.sample_done(0) and f.blocked(0)         # weights all 0: blocked indeed
     f.write_pass_mask(1, np.ones((2, 3), bool))      # field meshes: the mask, no weights
     f.sample_image(1).write_bytes(b"")
     assert f.sample_done(1)
     f.sample_mesh(1).write_text("mesh")
     assert [p.name for p in f.sample_outputs(1)] == ["sample_0001.exr", "sample_0001.mask.npy"]
-    f.mark_batch_done(0, [0, 1])
-    assert f.batch_done(0).read_text() == "0\n1\n"
+    f.mark_batch_done(0, [0, 1])                     # the files make checks
+    assert f.batch_done(0).read_text().split() == [
+        "samples/sample_0000.blocked", "samples/sample_0000.weight.exr",
+        "samples/sample_0001.exr", "samples/sample_0001.mask.npy"]
+
+
+def test_a_blocked_marker_is_trusted_only_when_its_files_agree(tmp_path):
+    f = RenderFolder(tmp_path)
+    f.samples.mkdir()
+    f.write_pass_mask(0, np.zeros((2, 3), bool))
+    f.sample_blocked(0).write_text("0 2\n")
+    assert f.blocked(0) and f.sample_done(0) and f.sample_damage(0) is None
+    f.write_pass_mask(0, np.ones((2, 3), bool))      # the mask passes light
+    assert not f.blocked(0) and not f.sample_done(0)
+    path, why = f.sample_damage(0)
+    assert path == f.sample_blocked(0) and "passes 6 pixels" in why
+    f.sample_image(0).write_bytes(b"")               # a stray marker beside an image
+    assert not f.blocked(0) and f.sample_done(0)
+    f.sample_mask(0).write_bytes(b"")                # an empty mask: damaged, named
+    assert not f.sample_done(0)
+    path, why = f.sample_damage(0)
+    assert path == f.sample_mask(0) and "cannot read the sample's pass mask" in why
 
 
 def test_a_changed_plan_drops_its_outputs(tmp_path):
