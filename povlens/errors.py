@@ -15,7 +15,8 @@ user's own text (a scene identifier ``'width'``) and are printed as they are.
 from __future__ import annotations
 
 __all__ = ["PovlensError", "LensFileError", "OpticsError", "UsageError", "ParameterError",
-           "PovrayError", "PovlensWarning", "LensClipWarning", "NominalFNumberWarning"]
+           "PovrayError", "WriteError", "PovrayWriteError", "PovlensWarning",
+           "LensClipWarning", "NominalFNumberWarning"]
 
 
 class PovlensError(Exception):
@@ -84,6 +85,37 @@ class PovrayError(PovlensError):
     """POV-Ray is missing or failed; the message carries POV-Ray's own output."""
 
     exit_code = 3
+
+
+class WriteError(PovlensError):
+    """The system refused to write an output: the device is full, a quota is reached,
+    the file system is read-only or the folder not writable.  Names the path.
+
+    Exit code 4: neither the input nor POV-Ray is at fault, and a later run in the same
+    folder resumes once there is room (nothing half-written is left at a final name).
+
+    Parameters
+    ----------
+    path : the file (or folder) that could not be written.
+    reason : the cause in words ("no space left on device", ...).
+    message : the whole message (default: ``cannot write PATH: REASON``).
+    hint : what to do (default: free space or choose another folder).
+    """
+
+    exit_code = 4
+
+    def __init__(self, path, reason: str, message: str | None = None, hint: str | None = None):
+        self.path = str(path)
+        self.reason = reason
+        super().__init__(message or f"cannot write {self.path}: {reason}",
+                         hint or "free some space there (or raise the quota), or write to "
+                                 "another folder; a rerun resumes where this one stopped")
+
+
+class PovrayWriteError(WriteError, PovrayError):
+    """POV-Ray could not write its output (image, render-state file or error log):
+    a :class:`WriteError` (exit code 4) that is also a :class:`PovrayError`; the
+    message keeps POV-Ray's own words."""
 
 
 class PovlensWarning(UserWarning):

@@ -46,10 +46,10 @@ from typing import IO, Iterable, Sequence
 from povlens.errors import PovrayError, UsageError
 from povlens.pov.executable import ENV_VAR, find_povray
 from povlens.pov.povray_options import PovrayOptions, as_povray_options
-from povlens.pov.povray_output import error_in_wrapper, povray_error_text
+from povlens.pov.povray_output import povray_failure
 from povlens.pov.povray_paths import command_line_path
 from povlens.util.files import atomic_output
-from povlens.util.signals import interrupts_deferred
+from povlens.util.signals import interrupts_deferred, starting_process
 
 __all__ = [
     "pixel_range_args",
@@ -282,13 +282,17 @@ def start_povray(cmd: Sequence[str], cwd: str | os.PathLike, stderr: IO, *, nice
     ------
     PovrayError
         If the program cannot be started.
+    povlens.util.signals.ProcessesStopped
+        If the command is ending (its processes were stopped).
     """
     prefix, preexec = _lower_priority(nice, idle)
     proc = None
     try:
         # An interrupt inside Popen, after the fork, would lose the child (Popen has
-        # no handle to return): hold it until the process is ours, then stop it.
-        with interrupts_deferred():
+        # no handle to return): hold it until the process is ours, then stop it.  No
+        # process starts once the command has stopped its processes (a thread still
+        # starting the depth probe's renders: util.signals.starting_process).
+        with interrupts_deferred(), starting_process():
             proc = subprocess.Popen(
                 prefix + list(cmd),
                 cwd=cwd,
@@ -462,12 +466,12 @@ def start_render(
         tmp = stack.enter_context(atomic_output(out_path))
         # the fatal-error log: a bare name, written into the image's folder
         log = tmp.parent / f".povlens-{os.getpid()}-{uuid.uuid4().hex[:12]}.log"
-        stack.callback(lambda: log.unlink(missing_ok=True))
+        stack.callback(_remove, log)
         # POV-Ray keeps a render-state file (image name, suffix .pov-state) while it
         # renders and removes it when done; a killed render leaves it behind.
         state = tmp.with_suffix(".pov-state")
-        stack.callback(lambda: state.unlink(missing_ok=True))
-        stack.callback(lambda: (workdir / state.name).unlink(missing_ok=True))
+        stack.callback(_remove, state)
+        stack.callback(_remove, workdir / state.name)
         # Relative names where possible: POV-Ray's I/O restrictions permit the
         # working directory.
         inp = os.path.relpath(pov_path, workdir) if _inside(pov_path, workdir) else str(pov_path)
@@ -550,25 +554,18 @@ class RenderJob:
         self._err.seek(0)
         stderr = io.TextIOWrapper(io.BytesIO(self._err.read()), errors="replace").read()
         log_text = self._log.read_text(errors="replace") if self._log.exists() else ""
-        if returncode != 0:
-            in_wrapper = error_in_wrapper(self.pov_path, self._workdir,
-                                          povray_error_text(stderr, log_text))
-            if in_wrapper is not None:
-                raise PovrayError(*in_wrapper)
-            raise PovrayError(
-                f"POV-Ray failed on {self.pov_path} (exit status {returncode}):\n"
-                + povray_error_text(stderr, log_text)
-                + f"\n(command, run in {self._workdir}: {shlex.join(self.cmd)})",
-                "fix the scene file named above, or run the command by hand "
-                "to see POV-Ray's whole output",
-            )
-        if not self._tmp.exists() or self._tmp.stat().st_size == 0:
-            raise PovrayError(
-                f"POV-Ray reported success on {self.pov_path} but wrote no image:\n"
-                + povray_error_text(stderr, log_text),
-                "check that the output folder is writable by POV-Ray "
-                "(see /etc/povray/3.7/povray.conf, [Permitted Paths])",
-            )
+        if returncode != 0 or not self._tmp.exists() or self._tmp.stat().st_size == 0:
+            raise povray_failure(
+                self.pov_path, self._workdir, returncode, stderr, log_text, self.out_path,
+                what=str(self.pov_path),
+                command=f"\n(command, run in {self._workdir}: {shlex.join(self.cmd)})")
+
+
+def _remove(path: Path) -> None:
+    """Remove ``path`` if it is there.  Quietly: a read-only folder refuses even the
+    removal of a file that is not there (EROFS), which must not hide POV-Ray's error."""
+    with contextlib.suppress(OSError):
+        path.unlink(missing_ok=True)
 
 
 def _inside(path: Path, folder: Path) -> bool:

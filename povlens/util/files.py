@@ -1,19 +1,109 @@
 """Atomic file output: a file appears at its final name complete or not at all.
 
 Every writer in povlens goes through :func:`atomic_output` (a temporary name in the
-same folder, renamed on success, removed on failure).  Text read from users' files is
+same folder, renamed on success, removed on failure).  A write the system refuses (a
+full device, a quota, a read-only file system, no permission) raises
+:class:`~povlens.errors.WriteError` naming the final path and the cause
+(:func:`write_error`), not a bare ``[Errno 28]``.  Text read from users' files is
 decoded by :func:`decode_text` (UTF-16 as Windows editors and Zemax write it, UTF-8,
 Latin-1).
 """
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import uuid
 from pathlib import Path
 from typing import Iterator
 
-from povlens.errors import UsageError
+from povlens.errors import PovlensError, UsageError, WriteError
+
+__all__ = ["temporary_path", "atomic_output", "write_text", "write_bytes", "decode_text",
+           "WRITE_ERRNOS", "free_bytes", "write_error", "write_error_reason", "write_error_hint"]
+
+#: errno values of a write the system refused, and the cause in words.
+WRITE_ERRNOS = {
+    errno.ENOSPC: "no space left on device",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EROFS: "read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+    errno.EFBIG: "file too large (the file size limit, ulimit -f, or the file system's)",
+}
+
+#: A folder with less free space than this (bytes) counts as full when a write into it
+#: failed without saying why (a library's error, POV-Ray's "Cannot access data in file").
+FULL_BELOW_BYTES = 64 * 1024
+
+#: What libraries say when a write failed for want of space.
+_NO_SPACE_WORDS = ("no space left", "disk quota")
+
+
+def free_bytes(folder: str | os.PathLike) -> int | None:
+    """Bytes an unprivileged writer may still use on the file system of ``folder``
+    (``os.statvfs``: f_bavail x f_frsize), or None where it cannot be asked."""
+    try:
+        st = os.statvfs(folder)
+    except (OSError, AttributeError):
+        return None
+    return st.f_bavail * st.f_frsize
+
+
+def write_error_reason(folder: str | os.PathLike, code: int | None) -> str:
+    """The cause of a refused write into ``folder`` in words, for errno ``code``
+    (:data:`WRITE_ERRNOS`); a full device's message gives the free space left."""
+    reason = WRITE_ERRNOS.get(code, os.strerror(code) if code else "the write failed")
+    if code in (errno.ENOSPC, errno.EDQUOT):
+        free = free_bytes(folder)
+        if free is not None:
+            reason += f" ({free} bytes free on the file system of {folder})"
+    return reason
+
+
+def write_error_hint(code: int | None) -> str:
+    """What to do about a write refused with errno ``code``."""
+    if code in (errno.EROFS, errno.EACCES, errno.EPERM):
+        return "write to another folder, or make this one writable"
+    if code == errno.EFBIG:
+        return "raise the file size limit (ulimit -f), or render a smaller image"
+    return ("free some space there (or raise the quota), or write to another folder; "
+            "a rerun resumes where this one stopped")
+
+
+def write_error(final: str | os.PathLike, exc: BaseException) -> WriteError | None:
+    """The :class:`~povlens.errors.WriteError` that ``exc``, raised while writing
+    ``final``, stands for; None if it is no refused write.
+
+    An ``OSError`` with an errno of :data:`WRITE_ERRNOS`; an error of a library (or a
+    povlens error) that says "No space left on device"; or an error of a library that
+    does not say why while the folder has (almost) no free space left.
+    """
+    final = Path(final)
+    folder = final.parent
+    if isinstance(exc, WriteError) or not isinstance(exc, Exception):
+        return None
+    if isinstance(exc, OSError) and exc.errno in WRITE_ERRNOS:
+        named = Path(os.fsdecode(exc.filename)) if exc.filename else None
+        if named is None or named.parent == folder:       # final, or its temporary name
+            return WriteError(final, write_error_reason(folder, exc.errno),
+                              hint=write_error_hint(exc.errno))
+        if exc.errno in (errno.EACCES, errno.EPERM):      # another file: perhaps a read
+            return None
+        return WriteError(named, write_error_reason(named.parent, exc.errno),
+                          hint=write_error_hint(exc.errno))
+    text = str(exc)
+    if any(w in text.lower() for w in _NO_SPACE_WORDS):
+        return WriteError(final, write_error_reason(folder, errno.ENOSPC),
+                          f"cannot write {final}: {write_error_reason(folder, errno.ENOSPC)}"
+                          f" ({text.strip()})")
+    free = free_bytes(folder)
+    if not isinstance(exc, (OSError, PovlensError)) and free is not None \
+            and free < FULL_BELOW_BYTES:
+        return WriteError(final, write_error_reason(folder, errno.ENOSPC),
+                          f"cannot write {final}: {write_error_reason(folder, errno.ENOSPC)}"
+                          f" ({type(exc).__name__}: {text.strip()})")
+    return None
 
 
 def temporary_path(final: str | os.PathLike) -> Path:
@@ -32,7 +122,10 @@ def atomic_output(final: str | os.PathLike) -> Iterator[Path]:
     """Context manager: yields a temporary path; renames it to ``final`` on success.
 
     On an exception the temporary file is removed and ``final`` is left as it
-    was, so a half-written file never appears under the final name.
+    was, so a half-written file never appears under the final name.  A write the
+    system refused (:func:`write_error`: a full device, a quota, a read-only file
+    system, no permission) is raised as :class:`~povlens.errors.WriteError` naming
+    ``final`` (the free space is measured before the temporary file is removed).
     """
     final = Path(final)
     if not final.parent.is_dir():
@@ -44,9 +137,12 @@ def atomic_output(final: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp
         os.replace(tmp, final)
-    except BaseException:
+    except BaseException as exc:
+        refused = write_error(final, exc)
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if refused is not None:
+            raise refused from exc
         raise
 
 
