@@ -6,10 +6,13 @@ stored under its absolute path on the client (without the leading ``/``):
 * the render folder's ``plan.json``, ``pupil.npz`` and wrappers (``*.pov``,
   ``samples/*.pov``);
 * the scene file and the lens file;
-* the scene's folder tree (its ``#include`` files and image maps, which POV-Ray finds
-  through the scene folder's ``+L``) and the tree of each ``library_paths`` folder,
+* the files the scene reads: those its text and its include files' name by literals
+  (``#include`` files, image maps, fonts, data files, found as POV-Ray finds them
+  through the scene folder's ``+L`` and the ``library_paths``:
+  :func:`povlens.cluster.scene_files.scene_reads`); when a file name is built by an
+  expression, the scene's folder tree and each ``library_paths`` folder's instead,
   leaving out hidden entries (names starting with ``.``), render folders (a folder
-  with a ``plan.json``) and caches; links travel as the content they lead to
+  with a ``plan.json``) and caches.  Links travel as the content they lead to
   (:mod:`povlens.cluster.scene_files`), so the bundle holds only files and folders.
 
 On the worker it is unpacked once per machine into ``<tmp>/povlens-cluster/<key>/``
@@ -36,7 +39,7 @@ import time
 from pathlib import Path
 
 from povlens.cluster.safe_tar import extract_checked
-from povlens.cluster.scene_files import SceneFiles
+from povlens.cluster.scene_files import SceneFiles, scene_reads
 from povlens.errors import ParameterError, PovlensError
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
@@ -66,13 +69,15 @@ def _render_folder_files(outdir: Path) -> list[Path]:
 
 def bundle_files(outdir: str | os.PathLike, plan: Plan) -> SceneFiles:
     """The files :func:`make_bundle` packs: ``.files`` {name on the client: file read},
-    ``.size_bytes`` (before compression).
+    ``.size_bytes`` (before compression), ``.trees_because`` (None: the files the
+    scene names; else why the folders' trees were taken).
 
     Raises
     ------
     ParameterError
-        ``shared_dir``: the files are larger than :data:`BUNDLE_LIMIT_BYTES`, or a
-        link in a folder leads to a hidden file (:mod:`povlens.cluster.scene_files`).
+        ``shared_dir``: the files are larger than :data:`BUNDLE_LIMIT_BYTES`, the
+        scene names a hidden file, or a link it reads through leads to one
+        (:mod:`povlens.cluster.scene_files`).
     """
     # absolute, not resolved: the wrappers' relative #include of the scene was
     # computed lexically from these paths (os.path.relpath)
@@ -93,9 +98,20 @@ def bundle_files(outdir: str | os.PathLike, plan: Plan) -> SceneFiles:
     for p in _render_folder_files(outdir) + [Path(os.path.abspath(inp.scene)),
                                              Path(os.path.abspath(inp.lens))]:
         files.add_file(p)
-    for folder in [scene_dir, *(Path(os.path.abspath(p)) for p in inp.library_paths)]:
+    reads = scene_reads(inp.scene, inp.library_paths)
+    if reads.files is not None:         # only the files the scene's text names
+        for name in reads.files:
+            files.add_read(name, next((f for f in reads.folders if _inside(name, f)),
+                                      reads.folders[0]))
+        return files
+    files.trees_because = reads.reason  # names built by expressions: the folders' trees
+    for folder in reads.folders:
         files.add_tree(folder)
     return files
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    return os.path.commonpath([path, folder]) == str(folder)
 
 
 def make_bundle(outdir: str | os.PathLike, plan: Plan,

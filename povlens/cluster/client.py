@@ -314,7 +314,9 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
     image : Path of ``image.exr``.
     stats : dict
         ``samples``, ``group_size``, ``wall_s``, ``connect_s``, ``scatter_s`` (bundle
-        to the workers), ``bundle_bytes``, ``workers``, ``threads``, and per task
+        to the workers), ``bundle_bytes`` (compressed), ``bundle_files``,
+        ``bundle_input_bytes`` (their size), ``bundle_trees_because`` (None: the files
+        the scene names were sent; else why the folders' trees), ``workers``, ``threads``, and per task
         (``tasks``): samples, host, arrival time, the client's time on it (write and
         add), result bytes and the worker's timing
         (:func:`povlens.cluster.worker.render_sample`).  Also written to
@@ -360,7 +362,8 @@ def _job(outdir: Path, plan, shared_dir: bool) -> dict:
     files = bundle_files(outdir, plan)
     key, data = make_bundle(outdir, plan, files)
     return {"outdir": str(outdir), "key": key, "bundle": data, "shared": False,
-            "files": len(files.files), "input_bytes": files.size_bytes}
+            "files": len(files.files), "input_bytes": files.size_bytes,
+            "trees_because": files.trees_because}
 
 
 #: A bundle this large (bytes, before compression) is reported on stderr.
@@ -371,9 +374,12 @@ def _note_bundle(job: dict, plan, quiet: bool) -> None:
     """Say how much is sent to the workers when it is large (not when ``quiet``)."""
     size = job.get("input_bytes", 0)
     if not quiet and size >= NOTE_BUNDLE_BYTES:
-        print(f"povlens: sending {job['files']} files ({size / 1e6:.0f} MB) of "
-              f"{Path(plan.inputs.scene).parent} and the render folder to the workers "
-              f"(hidden files left out)", file=sys.stderr)
+        why = job.get("trees_because")
+        what = ("the files the scene names" if why is None else
+                f"the folder {Path(plan.inputs.scene).parent} and the library folders, "
+                f"hidden files left out ({why})")
+        print(f"povlens: sending {job['files']} files ({size / 1e6:.0f} MB) to the "
+              f"workers: the render folder, the lens and {what}", file=sys.stderr)
 
 
 def _render_on(client, outdir: Path, plan, lens, table, done: list, todo: list[int],
@@ -393,7 +399,8 @@ def _render_on(client, outdir: Path, plan, lens, table, done: list, todo: list[i
         job = _job(outdir, plan, shared_dir)
         stats.update(bundle_bytes=len(job["bundle"] or b""), group_size=size,
                      groups=len(groups), bundle_files=job.get("files", 0),
-                     bundle_input_bytes=job.get("input_bytes", 0))
+                     bundle_input_bytes=job.get("input_bytes", 0),
+                     bundle_trees_because=job.get("trees_because"))
         _note_bundle(job, plan, quiet)
         futures = _submit(client, job, groups, size)
         stats["scatter_s"] = time.perf_counter() - t0 - stats["connect_s"]

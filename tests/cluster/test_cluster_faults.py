@@ -141,7 +141,14 @@ def test_links_in_the_scene_folder_arrive_as_the_files_they_lead_to(cluster, tmp
     assert all(m.isfile() or m.isdir() for m in members)        # no link travels
     names = {m.name for m in members}
     base = str(tmp_path / "scene").lstrip("/")
-    assert {f"{base}/alias.inc", f"{base}/parts/look.inc", f"{base}/maps/checker.png"} <= names
+    # the files the scene names, under the names it reads them by
+    assert {f"{base}/main.pov", f"{base}/alias.inc", f"{base}/maps/checker.png"} <= names
+    # an include named by an expression: the folder's tree, links followed the same way
+    scene.write_text(scene.read_text().replace('"alias.inc"', 'concat("alias", ".inc")'))
+    files = bundle_module.bundle_files(tmp_path / "dist", read_plan(tmp_path / "dist"))
+    assert "names a file by an expression ('#include concat" in files.trees_because
+    assert {tmp_path / "scene" / n for n in ("alias.inc", "parts/look.inc", "maps/checker.png")
+            } <= set(files.files)
 
 
 def test_a_link_to_a_hidden_file_is_refused_naming_the_link(cluster, tmp_path):
@@ -150,8 +157,9 @@ def test_a_link_to_a_hidden_file_is_refused_naming_the_link(cluster, tmp_path):
     scene.write_text("camera { location <0, 0, -5> look_at 0 }\n"
                      "sphere { 0, 1 pigment { rgb 1 } }\nlight_source { <0, 5, -5> rgb 1 }\n")
     (tmp_path / "home" / ".ssh").mkdir(parents=True)
-    (tmp_path / "home" / ".ssh" / "id_rsa").write_text("secret\n")
+    (tmp_path / "home" / ".ssh" / "id_rsa").write_text("// secret\n")
     (scene.parent / "key.inc").symlink_to(tmp_path / "home" / ".ssh" / "id_rsa")
+    scene.write_text(scene.read_text() + "#include \"key.inc\"\n")
     code, err, _ = _povlens("render", str(scene), *SMALL, "--focus", "5", "--samples", "2",
                             "-q", "-o", str(tmp_path / "o"), "--scheduler", cluster.address)
     assert code == 2, err
@@ -165,22 +173,32 @@ def test_hidden_files_and_folders_never_travel(tmp_path):
     scene.write_text("camera { location <0, 0, -5> look_at 0 }\n#include \"part.inc\"\n"
                      "light_source { <0, 5, -5> rgb 1 }\n")
     (scene.parent / "part.inc").write_text("sphere { 0, 1 pigment { rgb 1 } }\n")
-    for hidden in (".ssh/id_rsa", ".env", "textures/.cache/big.bin", ".git/config"):
+    for hidden in (".ssh/id_rsa", ".env", "textures/.cache/big.bin", ".git/config",
+                   "unread/notes.txt"):
         (scene.parent / hidden).parent.mkdir(parents=True, exist_ok=True)
         (scene.parent / hidden).write_text("secret\n")
     out = tmp_path / "o"
     povlens.convert(scene, outdir=out, lens="dgauss.50mm", focus=5, method="mesh",
                     samples=2, width=32, height=24)
-    _, data = make_bundle(out, read_plan(out))
-    with tarfile.open(fileobj=io.BytesIO(data)) as tar:
-        names = tar.getnames()
-    assert not [n for n in names if any(p.startswith(".") for p in n.split("/"))]
     base = str(scene.parent).lstrip("/")
-    assert f"{base}/s.pov" in names and f"{base}/part.inc" in names
-    # the size reported is what travels
-    files = bundle_module.bundle_files(out, read_plan(out))
-    assert files.size_bytes == sum(p.stat().st_size for p in files.files.values())
-    assert len(files.files) == len([n for n in names if n != "povlens-paths.json"])
+    text = scene.read_text()
+    # the files the scene names; and, an include named by an expression, the tree
+    for include, unread_sent in (('"part.inc"', False), ('concat("part", ".inc")', True)):
+        scene.write_text(text.replace('"part.inc"', include))
+        _, data = make_bundle(out, read_plan(out))
+        with tarfile.open(fileobj=io.BytesIO(data)) as tar:
+            names = tar.getnames()
+        assert not [n for n in names if any(p.startswith(".") for p in n.split("/"))]
+        assert f"{base}/s.pov" in names and f"{base}/part.inc" in names
+        assert (f"{base}/unread/notes.txt" in names) == unread_sent
+        # the size reported is what travels
+        files = bundle_module.bundle_files(out, read_plan(out))
+        assert files.size_bytes == sum(p.stat().st_size for p in files.files.values())
+        assert len(files.files) == len([n for n in names if n != "povlens-paths.json"])
+    # a scene naming a hidden file: refused, naming it
+    scene.write_text(text + '#include ".ssh/id_rsa"\n')
+    with pytest.raises(PovlensError, match=r"the scene reads .*id_rsa .*which is hidden"):
+        make_bundle(out, read_plan(out))
 
 
 def test_remove_replica_refuses_what_is_not_a_bundle_key(tmp_path, monkeypatch):
