@@ -71,9 +71,9 @@ FORGET_TIMEOUT_S = STOP_WAIT_S + 10.0
 #: How to start a scheduler, as the hints say it: listening on an address of the
 #: user's choice (without ``--host``, ``dask scheduler`` listens on every interface and
 #: anyone who reaches the port can run code on the workers).
-START_SCHEDULER = ("'dask scheduler --host HOST' (HOST: 127.0.0.1 on one machine, else "
-                   "an address on a network only your machines reach; tls:// with "
-                   "--tls-ca-file/--tls-cert/--tls-key elsewhere)")
+START_SCHEDULER = ("'dask scheduler --host HOST' (HOST: 127.0.0.1 on one machine, else an "
+                   "address of a network only your machines reach; elsewhere tls:// with "
+                   "--tls-ca-file, --tls-cert and --tls-key)")
 
 
 def scheduler_address(scheduler: str | None) -> str | None:
@@ -120,13 +120,13 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S, security=None):
             "scheduler", address,
             f"scheduler={address}: no Dask scheduler answered within {timeout_s:g} s "
             f"({reason})",
-            f"start one with {START_SCHEDULER} and give its address (tcp://HOST:8786); "
-            "for a tls:// scheduler, set Dask's distributed.comm.tls configuration; or "
+            f"start one with {START_SCHEDULER} and give its address (tcp://HOST:8786), or "
             "leave out 'scheduler' to render on this machine") from None
 
 
 #: The Dask configuration a tls:// scheduler needs on the client, as variables.
-TLS_VARIABLES = ("DASK_DISTRIBUTED__COMM__TLS__CA_FILE", "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT",
+TLS_VARIABLES = ("DASK_DISTRIBUTED__COMM__TLS__CA_FILE",
+                 "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT",
                  "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY")
 
 
@@ -316,9 +316,9 @@ def render_outdir_on_cluster(outdir: str | os.PathLike, scheduler,
         ``samples``, ``group_size``, ``wall_s``, ``connect_s``, ``scatter_s`` (bundle
         to the workers), ``bundle_bytes`` (compressed), ``bundle_files``,
         ``bundle_input_bytes`` (their size), ``bundle_trees_because`` (None: the files
-        the scene names were sent; else why the folders' trees), ``workers``, ``threads``, and per task
-        (``tasks``): samples, host, arrival time, the client's time on it (write and
-        add), result bytes and the worker's timing
+        the scene names were sent; else why the folders' trees), ``workers``,
+        ``threads``, and per task (``tasks``): samples, host, arrival time, the
+        client's time on it (write and add), result bytes and the worker's timing
         (:func:`povlens.cluster.worker.render_sample`).  Also written to
         ``samples/cluster.timing.json``.
     """
