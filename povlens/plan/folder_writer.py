@@ -9,7 +9,11 @@ OUTDIR (file names: :class:`povlens.plan.render_folder.RenderFolder`) gets
   sample each per POV-Ray run (the sample's ray mesh is written just before,
   :mod:`povlens.rendering.mesh_samples`);
 * ``Makefile``: ``make -C OUTDIR -j2`` renders and composites; a second ``make``
-  does nothing.
+  does nothing.  A batch's marker lists its samples' files
+  (:meth:`~povlens.plan.render_folder.RenderFolder.mark_batch_done`) and the Makefile
+  reads it: when one of them is gone (a damaged sample deleted) the batch renders
+  again.  Its recipes run side by side under the folder's shared lock
+  (:mod:`povlens.plan.folder_lock`).
 
 Files whose text is unchanged are left alone (make compares modification
 times), and what an earlier plan rendered that the new one cannot use is removed.
