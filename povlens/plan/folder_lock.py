@@ -59,7 +59,8 @@ def _command_of(pid: int) -> str:
         raw = Path(f"/proc/{pid}/cmdline").read_bytes()
     except OSError:
         return ""
-    text = " ".join(a.decode(errors="replace") for a in raw.split(b"\0") if a)
+    text = " ".join(" ".join(a.decode(errors="replace").split()) for a in raw.split(b"\0"))
+    text = text.strip()
     return text if len(text) <= _COMMAND_CHARS else text[:_COMMAND_CHARS - 3] + "..."
 
 

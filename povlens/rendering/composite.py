@@ -119,7 +119,9 @@ def _checked_weight(w, k: int, path, n: int, shape: tuple) -> np.ndarray:
             f"weight array {k} (for {path}) has shape {w.shape}, expected {shape}"
         )
     if not np.all(np.isfinite(w)) or np.any(w < 0):
-        raise PovlensError(f"weight array {k} (for {path}) has negative or non-finite values")
+        raise PovlensError(f"weight array {k} (for {path}) has negative or non-finite values",
+                           "its weights file is damaged; delete the sample's files and "
+                           "render again ('povlens render' or 'make' in the folder)")
     return w
 
 
