@@ -389,13 +389,23 @@ def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
     d[rows] = 2.0 * a[rows]
     clipped = lens.replace(aperture_diameter_mm=d)
     _check_surfaces_do_not_cross(clipped)  # before warning: a refused lens gets no notices
-    for j in rows:
+    for j in rows[:CLIP_WARNINGS_SHOWN]:
         where = f"{lens.source}:{lens.lines[j]}" if lens.lines and lens.lines[j] else lens.source
         warnings.warn(LensClipWarning(
             f"{where}: row {j}: aperture diameter "
             f"{lens.aperture_diameter_mm[j]:g} mm clipped to {d[j]:.6g} mm, where "
             f"{why[j]} (the stated diameter is taken as a housing diameter)"), stacklevel=3)
+    rest = rows[CLIP_WARNINGS_SHOWN:]
+    if rest:
+        warnings.warn(LensClipWarning(
+            f"{lens.source}: {len(rest):,} more rows' aperture diameters clipped the same "
+            f"way (rows {rest[0]} to {rest[-1]}; smallest {min(d[rest]):.6g} mm)"),
+            stacklevel=3)
     return clipped
+
+
+#: Clipped rows a lens's warnings name one by one; the others are counted in one more.
+CLIP_WARNINGS_SHOWN = 5
 
 
 def _meeting_height_mm(c0: float, c1: float, thickness_mm: float,

@@ -369,6 +369,11 @@ class Sampling(_Record):
         "colour-matching functions: lateral and longitudinal colour", flag="--dispersion",
         sets="true", check=flag, stored=False)
 
+    yes: bool = option(
+        False, "go on with a request far beyond the usual (lens samples, image size, lens "
+        "surfaces; povlens.plan.request_size) after saying what it costs; without it such "
+        "a request stops with exit 2", flag="--yes", sets="true", check=flag, stored=False)
+
     @property
     def auto_samples(self) -> bool:
         """True when ``--method auto`` sets the sample count (``samples`` not given)."""

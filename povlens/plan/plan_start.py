@@ -25,6 +25,7 @@ from povlens.plan.camera_setup import (camera_basis, camera_notes, film_of, focu
                                        framing_note, off_axis_direction, scene_camera_of,
                                        vector_tuple)
 from povlens.plan.options import ConvertOptions, povray_options_of
+from povlens.plan.request_size import check_request_size
 from povlens.plan.schema import PovrayCamera
 from povlens.pov.povray_options import PovrayOptions
 from povlens.thinlens.model import EquivalentThinLens, fit_thin_lens
@@ -108,6 +109,8 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
     lens = stopped_down(read_lens(opts.lens), stop_diameter_mm=opts.aperture.stop_diameter_mm,
                         f_number=opts.aperture.f_number)
     lens = shaped_lens(lens, shape_of_options(opts.aperture))    # iris / mask (plan.aperture)
+    samples = 1 if opts.sampling.method == "pinhole" else opts.sampling.sample_count
+    check_request_size(samples, opts.film.width, opts.film.height, lens, opts.sampling.yes)
     p = paraxial_data(lens)
     cam = scene_camera_of(opts)
     film, proportions = film_of(opts, cam)
