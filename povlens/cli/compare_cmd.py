@@ -9,7 +9,8 @@ import numpy as np
 import OpenImageIO as oiio
 
 from povlens.report.compare import (FLIP_PPD, PSNR_PEAK, CompareError, compare_arrays,
-                                    difference_magnitude, false_colour, flip_error)
+                                    difference_magnitude, false_colour, flip_error,
+                                    require_finite)
 from povlens.util.files import atomic_output
 from povlens.util.images import ImageError, read_image
 from povlens.cli.common import positive_float, print_json
@@ -59,6 +60,7 @@ def run(args) -> int:
     a = read_image(args.a)
     b = read_image(args.b)
     mask = read_image(args.mask) if args.mask else None
+    require_finite({args.a: a, args.b: b}, mask, args.mask or "mask")   # else NaN metrics
     r = compare_arrays(a, b, mask, args.a, args.b, args.mask or "mask")
     flip, flip_map = flip_error(a, b, mask, args.a, args.b, args.mask or "mask")
     if args.flip_map:

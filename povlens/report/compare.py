@@ -38,7 +38,7 @@ from povlens.errors import PovlensError
 
 __all__ = ["CompareError", "PSNR_PEAK", "colour_channels", "compare_arrays", "numpy_metrics",
            "oiio_metrics", "difference_magnitude", "false_colour", "flip_error", "srgb_preview",
-           "FLIP_PPD"]
+           "FLIP_PPD", "non_finite_pixels", "require_finite"]
 
 #: FLIP's viewing condition: pixels per degree of visual angle (its default, a 0.7 m
 #: distant 24" 4K monitor).
@@ -88,6 +88,59 @@ def _mask_pixels(mask, shape: tuple[int, int], name: str) -> np.ndarray:
             f"mask {name} is {m.shape[1]}x{m.shape[0]} pixels but the images are "
             f"{shape[1]}x{shape[0]}", "the mask must have the size of the images")
     return np.any(m != 0, axis=2)
+
+
+def non_finite_pixels(image: np.ndarray, mask: np.ndarray | None = None,
+                      name_mask: str = "mask") -> dict:
+    """Pixels of ``image`` with a NaN or infinite colour channel (alpha is not looked
+    at), among those where ``mask`` is non-zero (all without a mask).
+
+    Returns
+    -------
+    dict
+        ``pixels`` (non-finite ones), ``nan`` (with a NaN), ``inf`` (with an infinity
+        and no NaN), ``of`` (pixels looked at), ``first`` ((x, y) of the first in
+        reading order, or None).
+    """
+    a = _hwc(image, "image")
+    colour = a[:, :, :colour_channels(a.shape[2])]
+    sel = (np.ones(a.shape[:2], bool) if mask is None
+           else _mask_pixels(mask, a.shape[:2], name_mask))
+    nan = np.isnan(colour).any(axis=2) & sel
+    bad = ~np.isfinite(colour).all(axis=2) & sel
+    ys, xs = np.nonzero(bad)
+    return {"pixels": int(bad.sum()), "nan": int(nan.sum()), "inf": int((bad & ~nan).sum()),
+            "of": int(sel.sum()), "first": (int(xs[0]), int(ys[0])) if xs.size else None}
+
+
+def require_finite(images: dict, mask: np.ndarray | None = None,
+                   name_mask: str = "mask") -> None:
+    """Refuse images that hold NaN or infinite pixels: every metric of them would be NaN
+    or infinite, and say nothing about the rest.
+
+    Parameters
+    ----------
+    images : {name: (H, W[, C]) array}, the name as the user gave it (a file path).
+    mask, name_mask : only pixels where the mask is non-zero are looked at.
+
+    Raises
+    ------
+    CompareError
+        Naming each image with non-finite pixels, how many (NaN, infinite) and where
+        the first is.
+    """
+    bad = []
+    for name, image in images.items():
+        n = non_finite_pixels(image, mask, name_mask)
+        if n["pixels"]:
+            x, y = n["first"]
+            bad.append(f"{name} holds {n['pixels']} non-finite pixel(s) of {n['of']}"
+                       f"{' in the mask' if mask is not None else ''} ({n['nan']} NaN, "
+                       f"{n['inf']} infinite; the first at x={x} y={y})")
+    if bad:
+        raise CompareError("; ".join(bad) + ": the differences there are undefined",
+                           "render the image again (a NaN pixel is a broken render), or "
+                           "leave those pixels out with a mask (--mask)")
 
 
 def _result(mean, rms, mx, where, n_pixels, nc, masked) -> dict:
