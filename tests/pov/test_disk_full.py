@@ -85,6 +85,21 @@ def test_povray_output_on_a_full_disk_names_the_cause_and_a_rerun_resumes(tmpfs,
     assert (out / "image.exr").is_file() and _half_written(out) == []
 
 
+@pytest.mark.xfail(strict=True, reason="povlens/rendering/mesh_samples.py (the render "
+                   "folder's owner) still makes its own message: its _collect must raise "
+                   "povlens.pov.povray_output.povray_failure(...) as process.py does")
+def test_a_lens_sample_on_a_full_disk_names_the_cause(tmpfs, tmp_path):
+    disk = tmpfs("100k")               # the folder fits, POV-Ray's state file does not
+    out = disk / "out"
+    r = _povlens(["render", str(SCENE), "--lens", "dgauss.50mm", "--focus", "4",
+                  "--method", "mesh", "--samples", "2", *SMALL, "-o", str(out)], tmp_path)
+    assert (out / "plan.json").is_file(), f"Python's writes failed first:\n{r.stderr}"
+    assert r.returncode == 4, r.stderr
+    assert "no space left on device" in r.stderr and str(out / "samples") in r.stderr
+    assert "POV-Ray said: Cannot access data in file." in r.stderr
+    assert "fix the scene" not in r.stderr and _half_written(out) == []
+
+
 def test_python_writes_on_a_full_disk_name_the_path(tmpfs, tmp_path):
     disk = tmpfs("8k")
     out = disk / "out"
