@@ -87,12 +87,14 @@ class PovrayError(PovlensError):
     exit_code = 3
 
 
-class WriteError(PovlensError):
+class WriteError(PovlensError, OSError):
     """The system refused to write an output: the device is full, a quota is reached,
     the file system is read-only or the folder not writable.  Names the path.
 
     Exit code 4: neither the input nor POV-Ray is at fault, and a later run in the same
     folder resumes once there is room (nothing half-written is left at a final name).
+    It is an ``OSError`` too (``errno``, ``strerror`` = ``reason``, ``filename`` =
+    ``path``), so code that lets an optional cache write fail quietly still does.
 
     Parameters
     ----------
@@ -100,16 +102,22 @@ class WriteError(PovlensError):
     reason : the cause in words ("no space left on device", ...).
     message : the whole message (default: ``cannot write PATH: REASON``).
     hint : what to do (default: free space or choose another folder).
+    code : the ``errno`` value, if known.
     """
 
     exit_code = 4
 
-    def __init__(self, path, reason: str, message: str | None = None, hint: str | None = None):
+    def __init__(self, path, reason: str, message: str | None = None, hint: str | None = None,
+                 code: int | None = None):
         self.path = str(path)
         self.reason = reason
         super().__init__(message or f"cannot write {self.path}: {reason}",
                          hint or "free some space there (or raise the quota), or write to "
                                  "another folder; a rerun resumes where this one stopped")
+        self.errno, self.strerror, self.filename = code, reason, self.path
+
+    def __str__(self) -> str:                  # the message, not OSError's "[Errno N] ..."
+        return Exception.__str__(self)
 
 
 class PovrayWriteError(WriteError, PovrayError):

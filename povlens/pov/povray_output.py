@@ -131,9 +131,11 @@ def error_in_wrapper(pov_path: Path, workdir: Path, error_text: str) -> tuple[st
             f"{found.group(2)}{said}",
             f"render the scene with POV-Ray alone (povray +I{Path(scene).name}) to see where")
 
-#: POV-Ray's words for a file it could not create or write.
+#: POV-Ray's words for a file it could not create or write (not for one it could not
+#: read: "Parse Error: Cannot open include file ...").
 _WRITE_FAILED = re.compile(
-    r"Cannot (access data in file\.?|create[^\n]*?file\.|open[^\n]*|write[^\n]*)|"
+    r"Cannot (access data in file\.?|create[^\n]*?file\.|open[^\n]*for output\.?|"
+    r"write[^\n]*)|"
     r"No space left[^\n.]*|"
     r"Disk quota[^\n]*", re.I)
 
@@ -201,27 +203,25 @@ def output_write_failure(output: str | os.PathLike, returncode: int, error_text:
     """
     output = Path(output)
     folder = output.parent
-    said = _WRITE_FAILED.search(error_text)
-    parse_error = "Parse Error" in error_text
-    code = None
     if returncode in (-signal.SIGXFSZ, 128 + signal.SIGXFSZ):
         code = errno.EFBIG
+    elif "Parse Error" in error_text:     # the scene's error, even on a full disk
+        return None
     else:
         code = _folder_refuses(folder)
-        if code is not None and parse_error and not said:
-            code = None                   # a scene error on a nearly full disk
-    if code is None and said is None:
+    if code is None and _WRITE_FAILED.search(error_text) is None:
         return None
     reason = (write_error_reason(folder, code) if code is not None else
               "POV-Ray could not write there (the system gave no cause)")
+    hint = write_error_hint(code)
+    if code in (None, errno.ENOSPC, errno.EDQUOT):
+        hint += (" (POV-Ray keeps a render-state file about as large as the image's pixels "
+                 "there while it renders)")
     return PovrayWriteError(
-        output, reason,
-        f"POV-Ray could not write {output} while rendering {what} "
-        f"({exit_status_text(returncode)}): {reason}\nPOV-Ray said: "
-        + _failure_words(error_text),
-        write_error_hint(code) + ("" if code not in (None, errno.ENOSPC, errno.EDQUOT) else
-                                  " (POV-Ray keeps a render-state file about as large as "
-                                  "the image's pixels there while it renders)"))
+        output, reason, code=code, hint=hint,
+        message=f"POV-Ray could not write {output} while rendering {what} "
+                f"({exit_status_text(returncode)}): {reason}\nPOV-Ray said: "
+                + _failure_words(error_text))
 
 
 def povray_failure(pov_path: str | os.PathLike, workdir: str | os.PathLike, returncode: int,

@@ -87,22 +87,22 @@ def write_error(final: str | os.PathLike, exc: BaseException) -> WriteError | No
         named = Path(os.fsdecode(exc.filename)) if exc.filename else None
         if named is None or named.parent == folder:       # final, or its temporary name
             return WriteError(final, write_error_reason(folder, exc.errno),
-                              hint=write_error_hint(exc.errno))
+                              hint=write_error_hint(exc.errno), code=exc.errno)
         if exc.errno in (errno.EACCES, errno.EPERM):      # another file: perhaps a read
             return None
         return WriteError(named, write_error_reason(named.parent, exc.errno),
-                          hint=write_error_hint(exc.errno))
+                          hint=write_error_hint(exc.errno), code=exc.errno)
     text = str(exc)
     if any(w in text.lower() for w in _NO_SPACE_WORDS):
         return WriteError(final, write_error_reason(folder, errno.ENOSPC),
                           f"cannot write {final}: {write_error_reason(folder, errno.ENOSPC)}"
-                          f" ({text.strip()})")
+                          f" ({text.strip()})", code=errno.ENOSPC)
     free = free_bytes(folder)
     if not isinstance(exc, (OSError, PovlensError)) and free is not None \
             and free < FULL_BELOW_BYTES:
         return WriteError(final, write_error_reason(folder, errno.ENOSPC),
                           f"cannot write {final}: {write_error_reason(folder, errno.ENOSPC)}"
-                          f" ({type(exc).__name__}: {text.strip()})")
+                          f" ({type(exc).__name__}: {text.strip()})", code=errno.ENOSPC)
     return None
 
 

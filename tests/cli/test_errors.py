@@ -228,6 +228,22 @@ def test_a_system_error_is_not_called_a_bug(monkeypatch, capsys):
     assert "bug" not in stderr and "Traceback" not in stderr
 
 
+@pytest.mark.parametrize("error, where", [
+    (OSError(28, "No space left on device"), "cannot write out (the command's output; "
+                                             "the system named no file): no space left"),
+    (OSError(28, "No space left on device", "out/x.exr"), "cannot write out/x.exr: no space"),
+    (OSError(30, "Read-only file system", "out/x.exr"), "cannot write out/x.exr: read-only"),
+])
+def test_a_refused_write_names_the_path_and_exits_4(monkeypatch, capsys, error, where):
+    """An OSError of a full disk that escaped povlens's own writers (which raise
+    WriteError naming the file): the file the system named, else the command's output."""
+    monkeypatch.delenv(DEBUG_ENV_VAR, raising=False)
+    rc, stderr = cli(monkeypatch, capsys, VIEW, error)
+    assert rc == 4
+    assert f"povlens render-view: error: {where}" in stderr, stderr
+    assert "[Errno" not in stderr and "bug" not in stderr and "hint:" in stderr
+
+
 def test_the_debug_variable_shows_the_traceback(monkeypatch, capsys):
     monkeypatch.setenv(DEBUG_ENV_VAR, "1")
     with pytest.raises(RuntimeError, match="boom"):

@@ -157,3 +157,40 @@ def test_a_parse_warning_in_the_wrapper_is_no_parse_error():
     text = ("File 'pinhole.pov' line 18: Parse Warning: More than one camera in scene.\n"
             "Cannot access data in file.\nRender failed")
     assert error_in_wrapper(Path("pinhole.pov"), ROOT, text) is None
+
+
+def _fill(folder: Path) -> None:
+    """Write into ``folder`` until its file system is full."""
+    fd = os.open(folder / "filler", os.O_WRONLY | os.O_CREAT)
+    try:
+        while os.write(fd, b"\0" * 4096):
+            pass
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def test_an_optional_cache_on_a_full_disk_is_left_alone(tmpfs, tmp_path):
+    """The POV-Ray version cache ($XDG_CACHE_HOME) cannot be written: the render goes
+    on (a WriteError is an OSError, which the cache's writer lets pass)."""
+    cache = tmpfs("16k")
+    (cache / "povlens").mkdir()
+    _fill(cache)
+    out = tmp_path / "out"
+    r = _povlens(["render", str(SCENE), "--lens", "dgauss.50mm", "--focus", "4",
+                  "--method", "pinhole", *SMALL, "-o", str(out)], tmp_path,
+                 env=dict(os.environ, XDG_CACHE_HOME=str(cache)))
+    assert r.returncode == 0, r.stderr
+    assert (out / "image.exr").is_file()
+    assert sorted(p.name for p in (cache / "povlens").iterdir()) == []
+
+
+def test_a_missing_include_is_the_scenes_error_not_a_write_failure(tmp_path):
+    scene = tmp_path / "s.pov"
+    scene.write_text('#version 3.7;\n#include "not_there.inc"\n'
+                     "camera { location <0, 0, -5> look_at 0 }\n")
+    with pytest.raises(Exception) as e:
+        render(scene, tmp_path / "img.exr", 32, 24)
+    assert not isinstance(e.value, WriteError) and e.value.exit_code == 3
+    assert "not_there.inc" in str(e.value)
