@@ -17,7 +17,7 @@ import uuid
 from pathlib import Path
 from typing import Iterator
 
-from povlens.errors import PovlensError, UsageError, WriteError
+from povlens.errors import PovrayError, UsageError, WriteError
 
 __all__ = ["temporary_path", "atomic_output", "write_text", "write_bytes", "decode_text",
            "WRITE_ERRNOS", "free_bytes", "write_error", "write_error_reason", "write_error_hint"]
@@ -41,13 +41,18 @@ _NO_SPACE_WORDS = ("no space left", "disk quota")
 
 
 def free_bytes(folder: str | os.PathLike) -> int | None:
-    """Bytes an unprivileged writer may still use on the file system of ``folder``
-    (``os.statvfs``: f_bavail x f_frsize), or None where it cannot be asked."""
+    """Bytes this process may still write on the file system of ``folder``
+    (``os.statvfs``: f_bavail x f_frsize; f_bfree for root, who may use the blocks
+    reserved for it), or None where it cannot be asked or the file system tells no
+    size (f_blocks 0: an unlimited tmpfs, some FUSE file systems)."""
     try:
         st = os.statvfs(folder)
     except (OSError, AttributeError):
         return None
-    return st.f_bavail * st.f_frsize
+    if st.f_blocks == 0:
+        return None
+    blocks = st.f_bfree if hasattr(os, "geteuid") and os.geteuid() == 0 else st.f_bavail
+    return blocks * st.f_frsize
 
 
 def write_error_reason(folder: str | os.PathLike, code: int | None) -> str:
@@ -76,8 +81,10 @@ def write_error(final: str | os.PathLike, exc: BaseException) -> WriteError | No
     ``final``, stands for; None if it is no refused write.
 
     An ``OSError`` with an errno of :data:`WRITE_ERRNOS`; an error of a library (or a
-    povlens error) that says "No space left on device"; or an error of a library that
-    does not say why while the folder has (almost) no free space left.
+    povlens error) that says "No space left on device"; or any other error but
+    POV-Ray's (classified by :func:`povlens.pov.povray_output.povray_failure`) while
+    the folder has (almost) no free space left (OpenImageIO: "Failed to write pixel
+    data").
     """
     final = Path(final)
     folder = final.parent
@@ -92,13 +99,13 @@ def write_error(final: str | os.PathLike, exc: BaseException) -> WriteError | No
             return None
         return WriteError(named, write_error_reason(named.parent, exc.errno),
                           hint=write_error_hint(exc.errno), code=exc.errno)
-    text = str(exc)
+    text = getattr(exc, "message", None) or str(exc)      # a povlens error: without hint
     if any(w in text.lower() for w in _NO_SPACE_WORDS):
         return WriteError(final, write_error_reason(folder, errno.ENOSPC),
                           f"cannot write {final}: {write_error_reason(folder, errno.ENOSPC)}"
                           f" ({text.strip()})", code=errno.ENOSPC)
     free = free_bytes(folder)
-    if not isinstance(exc, (OSError, PovlensError)) and free is not None \
+    if not isinstance(exc, (OSError, PovrayError)) and free is not None \
             and free < FULL_BELOW_BYTES:
         return WriteError(final, write_error_reason(folder, errno.ENOSPC),
                           f"cannot write {final}: {write_error_reason(folder, errno.ENOSPC)}"
@@ -136,6 +143,12 @@ def atomic_output(final: str | os.PathLike) -> Iterator[Path]:
     tmp = temporary_path(final)
     try:
         yield tmp
+        if free_bytes(final.parent) == 0 and tmp.exists():
+            # Some writers (OpenImageIO's PNG) report no error when the device fills:
+            # a file written up to the last free byte is taken as cut short.
+            raise WriteError(final, "no space left on device (the file system is full "
+                                    "after the write: the file may be cut short)",
+                             hint=write_error_hint(errno.ENOSPC), code=errno.ENOSPC)
         os.replace(tmp, final)
     except BaseException as exc:
         refused = write_error(final, exc)

@@ -194,3 +194,25 @@ def test_a_missing_include_is_the_scenes_error_not_a_write_failure(tmp_path):
         render(scene, tmp_path / "img.exr", 32, 24)
     assert not isinstance(e.value, WriteError) and e.value.exit_code == 3
     assert "not_there.inc" in str(e.value)
+
+
+def test_images_on_a_full_disk_are_refused_not_cut_short(tmpfs):
+    """OpenImageIO's EXR writer fails ('Failed to write pixel data'); its PNG writer
+    reports nothing and leaves a file cut at the last free byte: neither may appear."""
+    import numpy as np
+    from povlens.util.images import write_exr, write_png_srgb
+    disk = tmpfs("16k")
+    pixels = np.random.default_rng(1).random((200, 200, 3)).astype(np.float32)
+    for write, name in ((write_exr, "image.exr"), (write_png_srgb, "image.png")):
+        with pytest.raises(WriteError, match="no space left on device") as e:
+            write(disk / name, pixels)
+        assert e.value.path == str(disk / name)
+        assert list(disk.iterdir()) == [], name
+
+
+def test_a_file_system_without_a_size_is_not_taken_as_full(tmpfs):
+    """An unlimited tmpfs (size=0) reports 0 blocks and 0 free: writes still go."""
+    disk = tmpfs("0")
+    assert os.statvfs(disk).f_blocks == 0
+    write_text(disk / "plan.txt", "x" * 100_000)
+    assert (disk / "plan.txt").stat().st_size == 100_000
