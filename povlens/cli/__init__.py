@@ -102,7 +102,7 @@ def terminate_as_interrupt():
     RECEIVED.clear()
     previous = {s: signal.signal(s, h) for s, h in ((signal.SIGTERM, _terminate),
                                                      (signal.SIGINT, _interrupt))}
-    return lambda: [signal.signal(s, h) for s, h in previous.items()]
+    return lambda: [signal.signal(s, h) for s, h in previous.items() if h is not None]
 
 
 def _stopped_by_signal(command: str, error: BaseException) -> int:
@@ -162,6 +162,8 @@ def run() -> None:
     into death by SIGINT.  The command's clean-up has run by then."""
     code = main()
     if code != 0:
+        for s in (signal.SIGINT, signal.SIGTERM):   # a second signal must not cut this short
+            signal.signal(s, signal.SIG_IGN)
         kill_descendants()
     if code in (130, 143):
         sys.stdout.flush()
