@@ -94,6 +94,7 @@ from povlens.pov.povray_paths import include_text
 from povlens.pov.process import start_render
 from povlens.pov.sdl import pov_vector
 from povlens.util.files import write_text
+from povlens.util.signals import interrupts_deferred
 
 __all__ = ["ProbeView", "probe_depth", "start_probe", "DepthProbe", "probe_wrapper",
            "ray_directions", "axial_depth", "distance_from_fade", "depth_limits",
@@ -451,9 +452,12 @@ class DepthProbe:
         return distance_from_fade(images["b0"], images["b1"], images["b2"], self.fade_distance)
 
     def cancel(self) -> None:
-        """Stop the renders still running and remove the temporary folder."""
-        try:
-            for job in self._jobs.values():
-                job.cancel()
-        finally:
-            shutil.rmtree(self._tmp, ignore_errors=True)
+        """Stop the renders still running and remove the temporary folder.  A second
+        Ctrl-C or SIGTERM waits until every render is stopped (it would leave the
+        rest running)."""
+        with interrupts_deferred():
+            try:
+                for job in self._jobs.values():
+                    job.cancel()
+            finally:
+                shutil.rmtree(self._tmp, ignore_errors=True)

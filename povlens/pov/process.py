@@ -519,15 +519,17 @@ class RenderJob:
         return self.out_path
 
     def cancel(self) -> None:
-        """Stop POV-Ray (if still running) and remove its temporary files."""
+        """Stop POV-Ray (if still running) and remove its temporary files (a Ctrl-C
+        or SIGTERM meanwhile waits until they are gone)."""
         if self._done:
             return
         self._done = True
-        self._kill()
-        try:
-            raise PovrayError(f"render of {self.pov_path} cancelled")
-        except PovrayError as exc:
-            self._stack.__exit__(type(exc), exc, exc.__traceback__)
+        with interrupts_deferred():
+            self._kill()
+            try:
+                raise PovrayError(f"render of {self.pov_path} cancelled")
+            except PovrayError as exc:
+                self._stack.__exit__(type(exc), exc, exc.__traceback__)
 
     def _kill(self) -> None:
         if self.proc.poll() is None:

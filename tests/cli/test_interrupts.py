@@ -231,3 +231,24 @@ def test_a_failed_or_terminated_command_leaves_no_child(script, code, word):
     finally:
         if not _gone(pid):
             os.kill(pid, signal.SIGKILL)
+
+
+@pytest.mark.parametrize("command", ["plan", "render"])
+def test_a_second_signal_during_the_clean_up_leaves_nothing(tmp_path, command):
+    """SIGTERM, then SIGINT 30 ms later (a batch system, then an impatient user): the
+    clean-up of the first is not cut short by the second."""
+    outdir = tmp_path / "out"
+    p = _start([command, str(SCENE), "--lens", "dgauss.50mm", "--focus", "4", "--width",
+                "640", "--height", "480", "-o", str(outdir)], tmp_path)
+    deadline = time.monotonic() + 60
+    while not _povray_processes(str(tmp_path)) and p.poll() is None:
+        assert time.monotonic() < deadline, "POV-Ray never started"
+        time.sleep(0.02)
+    time.sleep(0.2)
+    p.send_signal(signal.SIGTERM)
+    time.sleep(0.03)
+    if p.poll() is None:
+        p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode in (130, 143) and "Traceback" not in err, err
+    _assert_clean(tmp_path, outdir)
