@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from povlens.errors import PovlensError, UsageError
+from povlens.errors import PovlensError, UsageError, WriteError
 from povlens.lens.prescription import LensPrescription
 from povlens.util.files import write_bytes
 
@@ -58,6 +58,8 @@ def write_table_file(path, arrays: dict, lens: LensPrescription, metadata: dict)
              metadata=np.array(meta))
     try:
         write_bytes(path, buf.getvalue())
+    except WriteError:
+        raise                        # a full disk, a read-only folder: names it, exit 4
     except OSError as e:
         raise UsageError(f"{path}: cannot write there ({e.strerror})") from None
     return path

@@ -100,11 +100,12 @@ def test_a_lens_sample_on_a_full_disk_names_the_cause(tmpfs, tmp_path):
     assert "fix the scene" not in r.stderr and _half_written(out) == []
 
 
-def test_python_writes_on_a_full_disk_name_the_path(tmpfs, tmp_path):
+@pytest.mark.parametrize("method", ["pinhole", "mesh"])     # mesh: pupil.npz first
+def test_python_writes_on_a_full_disk_name_the_path(tmpfs, tmp_path, method):
     disk = tmpfs("8k")
     out = disk / "out"
     r = _povlens(["convert", str(SCENE), "--lens", "dgauss.50mm", "--focus", "4",
-                  "--method", "pinhole", *SMALL, "-o", str(out)], tmp_path)
+                  "--method", method, *SMALL, "-o", str(out)], tmp_path)
     assert r.returncode == 4, r.stderr
     line = next(ln for ln in r.stderr.splitlines() if "error:" in ln)
     assert f"cannot write {out}/" in line and "no space left on device" in line, line
