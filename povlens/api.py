@@ -400,8 +400,13 @@ def compare(a: str | os.PathLike | np.ndarray, b: str | os.PathLike | np.ndarray
     dict
         ``rmse``, ``psnr_db``, ``mean_abs_error``, ``max_abs_error`` and ``max_at``
         (where the largest error is), ``pixels``, ``channels``, ``masked``.
+
+    Raises
+    ------
+    CompareError
+        An image holding NaN or infinite pixels (inside the mask): named, with how many.
     """
-    from povlens.report.compare import compare_arrays
+    from povlens.report.compare import compare_arrays, require_finite
     from povlens.util.images import read_image
 
     def load(x):
@@ -410,7 +415,11 @@ def compare(a: str | os.PathLike | np.ndarray, b: str | os.PathLike | np.ndarray
     m = load(mask)
     if m is not None and m.ndim == 3:
         m = m[..., 0]
-    return compare_arrays(load(a), load(b), m)
+    ia, ib = load(a), load(b)
+    name_a = "array a" if isinstance(a, np.ndarray) else str(a)
+    name_b = "array b" if isinstance(b, np.ndarray) else str(b)
+    require_finite({name_a: ia, (name_b if name_b != name_a else name_b + " (b)"): ib}, m)
+    return compare_arrays(ia, ib, m)
 
 
 def import_lens(source: str | os.PathLike, out: str | os.PathLike | None = None, *,

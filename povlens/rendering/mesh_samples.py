@@ -34,14 +34,14 @@ from pathlib import Path
 
 import numpy as np
 
-from povlens.errors import PovlensError, PovrayError
+from povlens.errors import PovlensError
 from povlens.plan.folder_lock import batch_lock, folder_lock
 from povlens.plan.options import povray_options_of
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pov.executable import find_povray
 from povlens.pov.mesh import write_ray_mesh
-from povlens.pov.povray_output import error_in_wrapper, povray_error_text
+from povlens.pov.povray_output import povray_failure
 from povlens.pov.process import (pixel_range_args, povray_command, povray_finished,
                                  render_switches, start_povray)
 from povlens.pupil.rays import sample_points, sample_rays
@@ -218,18 +218,14 @@ class _SampleRenders:
 
     def _collect(self, k: int, proc: subprocess.Popen, tmp: Path) -> None:
         pov = self.folder.batch_wrapper(self.batch)
-        if proc.returncode != 0:
-            stderr = (tmp / "stderr.txt").read_text(errors="replace")
-            in_wrapper = error_in_wrapper(pov, self.samples, povray_error_text(stderr, ""))
-            if in_wrapper is not None:
-                raise PovrayError(*in_wrapper)
-            raise PovrayError(f"POV-Ray failed on {pov}, lens sample {k} (exit status "
-                              f"{proc.returncode}):\n" + povray_error_text(stderr, ""),
-                              "fix the scene, or run 'make' in the folder to see the command")
         out = tmp / "f.exr"
-        if not out.exists():
-            raise PovrayError(f"POV-Ray rendered lens sample {k} of {pov} but wrote no image",
-                              "check free disk space and POV-Ray's permitted paths")
+        if proc.returncode != 0 or not out.exists():
+            # its real cause: a full disk, a parse error in the wrapper, or the scene
+            stderr = (tmp / "stderr.txt").read_text(errors="replace")
+            raise povray_failure(pov, self.samples, proc.returncode, stderr, "",
+                                 self.folder.sample_image(k), what=f"lens sample {k} of {pov}",
+                                 hint="fix the scene, or run 'make' in the folder to see "
+                                      "the command")
         os.replace(out, self.folder.sample_image(k))
 
     def finish(self) -> None:

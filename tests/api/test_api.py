@@ -59,3 +59,18 @@ def test_api_names_survive_the_import_of_every_subpackage():
     for name in povlens.__all__:
         if name != "__version__":
             assert not isinstance(getattr(povlens, name), type(povlens)), name
+
+
+def test_compare_names_an_image_with_non_finite_pixels(tmp_path):
+    """The API's compare refuses a NaN image by name, as the command does (issue 24)."""
+    import numpy as np
+    from povlens.report.compare import CompareError
+    from povlens.util.images import write_exr
+
+    a = np.full((6, 8, 3), 0.5, np.float32)
+    b = a.copy()
+    b[2, 3, 1] = np.nan
+    path = write_exr(tmp_path / "broken.exr", b)
+    assert povlens.compare(a, a)["rmse"] == 0.0
+    with pytest.raises(CompareError, match=r"broken\.exr holds 1 non-finite pixel"):
+        povlens.compare(a, path)

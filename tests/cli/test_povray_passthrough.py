@@ -3,7 +3,6 @@
 item 8), with the real POV-Ray and small images."""
 
 import json
-import os
 import shutil
 import subprocess
 import sys

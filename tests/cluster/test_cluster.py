@@ -454,3 +454,21 @@ def test_a_focus_pull_on_the_cluster_equals_the_local_pull(cluster, tmp_path, ca
     grouped = povlens.render_frames(SCENE, outdir=tmp_path / "api", focus=(2, 6), frames=2,
                                     scheduler=cluster.address, **opts)
     assert all(_close(read_image(p), x) for p, x in zip(grouped.images_exr, a))
+
+
+def test_a_scene_under_an_odd_path_renders_on_the_workers_as_here(cluster, tmp_path):
+    """Spaces and non-ASCII letters in the scene's folder, its include folder and the
+    render folder (issue 24 item 2, on the cluster): the workers' copy renders the image
+    the local render does."""
+    folder = tmp_path / "mes scènes" / "boîte à 'outils'"
+    scene = _scene_with_include_and_map(folder)
+    # (POV-Ray reads a scene's strings as ASCII: the include's own name has a space only)
+    (folder / "parts").rename(folder / "parts dir")
+    scene.write_text(scene.read_text().replace('"parts/look.inc"', '"parts dir/look.inc"'))
+    opts = dict(lens="dgauss.50mm", focus=6, method="mesh", samples=3, width=80, height=60)
+    local = povlens.render(scene, outdir=tmp_path / "ici é", **opts)
+    remote = povlens.render(scene, outdir=tmp_path / "là bas", scheduler=cluster.address,
+                            group_size=1, **opts)
+    a, b = read_image(local.image_exr), read_image(remote.image_exr)
+    assert a[..., 0].max() > 0.5 and a[..., 2].max() > 0.5     # the map's two colours
+    assert np.array_equal(a, b)

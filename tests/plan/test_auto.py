@@ -88,7 +88,6 @@ def test_plan_command_records_the_decision(tmp_path):
 def test_auto_plan_numbers_equal_a_plan_of_the_chosen_method(tmp_path):
     """convert(auto) reuses the pupil table and model error of its first plan: the plan
     must be what make_plan gives for the chosen method and samples."""
-    import dataclasses
 
     from povlens.plan.convert import convert, make_plan
     opts = ConvertOptions.of(scene=PAPER, lens="dgauss.50mm", focus=4, outdir=str(tmp_path / "a"),

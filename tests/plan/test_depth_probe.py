@@ -5,7 +5,6 @@ infinity; the auto path's probe of the plan's camera, and its errors."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import os

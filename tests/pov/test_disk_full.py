@@ -85,9 +85,6 @@ def test_povray_output_on_a_full_disk_names_the_cause_and_a_rerun_resumes(tmpfs,
     assert (out / "image.exr").is_file() and _half_written(out) == []
 
 
-@pytest.mark.xfail(strict=True, reason="povlens/rendering/mesh_samples.py (the render "
-                   "folder's owner) still makes its own message: its _collect must raise "
-                   "povlens.pov.povray_output.povray_failure(...) as process.py does")
 def test_a_lens_sample_on_a_full_disk_names_the_cause(tmpfs, tmp_path):
     disk = tmpfs("100k")               # the folder fits, POV-Ray's state file does not
     out = disk / "out"

@@ -18,7 +18,6 @@ import shutil
 import numpy as np
 import pytest
 
-from povlens.plan.field_grid import choose_field_mesh
 from povlens.plan.plan_finish import make_plan_with_lens
 from povlens.plan.options import ConvertOptions
 from povlens.pov import process as povray

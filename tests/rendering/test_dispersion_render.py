@@ -14,7 +14,6 @@ import pytest
 from povlens.cli import main
 from povlens.errors import PovlensError
 from povlens.lens.dispersion import BAND_NM, chief_landing_mm
-from povlens.lens.prescription import read_lens
 from povlens.plan.schema import read_plan
 from povlens.rendering import spectral
 from povlens.rendering.composite import accumulate_samples, measurement_image
