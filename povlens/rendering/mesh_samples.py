@@ -172,8 +172,11 @@ class _SampleRenders:
             self._reap(block=True)
         pv = self.plan.povray
         pov = self.folder.batch_wrapper(self.batch)
-        tmp = Path(tempfile.mkdtemp(prefix=self.folder.sample_temp_prefix(k), dir=self.samples))
+        tmp = None
         try:        # until the process is tracked, the folder is this call's to remove
+            with interrupts_deferred():     # made and named at once: never left unnamed
+                tmp = Path(tempfile.mkdtemp(prefix=self.folder.sample_temp_prefix(k),
+                                            dir=self.samples))
             rel = os.path.relpath(tmp, self.samples)
             switches = render_switches(
                 "f.exr", pv.render_width, pv.render_height, threads=1,
@@ -191,7 +194,8 @@ class _SampleRenders:
             if "proc" in locals():
                 proc.kill()
                 proc.wait()
-            shutil.rmtree(tmp, ignore_errors=True)
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
             raise
 
     def _finished(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
@@ -206,13 +210,14 @@ class _SampleRenders:
                 break
             time.sleep(0.005)
         for k in done:
-            proc, tmp, t0 = self.running.pop(k)
-            self.povray_s += time.perf_counter() - t0
+            proc, tmp, t0 = self.running[k]     # tracked until its folder is gone
             try:
+                self.povray_s += time.perf_counter() - t0
                 self._collect(k, proc, tmp)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
                 self.folder.sample_mesh(k).unlink(missing_ok=True)
+                self.running.pop(k, None)
             if self.on_done is not None:
                 self.on_done()
 
