@@ -18,6 +18,7 @@ from pathlib import Path
 
 from povlens.errors import PovrayError
 from povlens.pov.povray_output import last_lines
+from povlens.util.user_cache import cache_folder
 from povlens.util.files import write_text
 
 __all__ = [
@@ -59,8 +60,7 @@ def find_povray() -> str:
 
 
 def _version_cache_path() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "povlens" / "povray-version.json"
+    return cache_folder() / "povray-version.json"
 
 
 def _binary_key(executable: str) -> str | None:

@@ -32,7 +32,6 @@ import functools
 import importlib.metadata
 import importlib.util
 import io
-import os
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,7 @@ import numpy as np
 from povlens.errors import PovlensError
 from povlens.lens.dispersion import BAND_NM
 from povlens.util.files import write_bytes
+from povlens.util.user_cache import cache_folder
 
 __all__ = ["band_sampler", "colour_weights", "sample_wavelength_nm", "channel_factors",
            "plan_channel_factors", "CMF_SOURCE", "tables_from_colour_science", "table_cache_path"]
@@ -55,8 +55,7 @@ CMF_SOURCE = ("CIE 1931 2-degree colour-matching functions (colour-science) to l
 def table_cache_path(version: str) -> Path:
     """Where the band's tables made from colour-science ``version`` are kept
     (``$XDG_CACHE_HOME/povlens/``): importing colour-science costs about 1 s a process."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "povlens" / f"cmf-srgb-{version}-{BAND_NM[0]:g}-{BAND_NM[1]:g}nm.npz"
+    return cache_folder() / f"cmf-srgb-{version}-{BAND_NM[0]:g}-{BAND_NM[1]:g}nm.npz"
 
 
 def tables_from_colour_science() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

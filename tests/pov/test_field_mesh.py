@@ -6,7 +6,7 @@ against the emulation and the exact tracer, and a thin lens against focal_blur.
 * the certified grids of the bundled lenses hold at every pixel of a 640x480 frame,
   for pupil points and offsets the certification did not use;
 * the pass masks equal a full per-pixel trace;
-* an ideal thin lens encoded in field meshes equals POV-Ray's focal_blur at 640x480
+* an ideal thin lens encoded in field meshes equals POV-Ray's focal_blur at 320x240
   within Monte-Carlo noise.
 """
 
@@ -261,9 +261,9 @@ def test_povray_traces_the_emulated_rays(tmp_path):
 
 
 @needs_povray
-def test_thin_lens_field_meshes_match_focal_blur_at_640x480(tmp_path):
+def test_thin_lens_field_meshes_match_focal_blur_at_320x240(tmp_path):
     from tests.pov.test_mesh import LOC, SCENE, basis, box_filter
-    W, H = 640, 480
+    W, H = 320, 240
     aperture, focal = 1.2, 7.0          # POV-Ray aperture = 2 x lens diameter
     d, r, u = basis(W, H)
     (tmp_path / "scene.pov").write_text(SCENE)

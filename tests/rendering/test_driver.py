@@ -38,7 +38,8 @@ def test_cli_render_and_errors(tmp_path):
     # no camera: POV-Ray's default camera, said once
     nocam = tmp_path / "nocam.pov"
     nocam.write_text('#version 3.7;\nsphere { 0, 1 pigment { rgb 1 } }\n')
-    r = povlens("convert", str(nocam), "--lens", "dgauss.50mm", "--focus", "3", "-o",
+    small = ("--width", "32", "--height", "24")
+    r = povlens("convert", str(nocam), "--lens", "dgauss.50mm", "--focus", "3", *small, "-o",
                 str(tmp_path / "n"))
     assert r.returncode == 0, r.stderr
     assert r.stderr.count("povlens: note: the scene has no camera statement") == 1
@@ -47,11 +48,11 @@ def test_cli_render_and_errors(tmp_path):
     odd = tmp_path / "odd.pov"
     odd.write_text('#version 3.7;\n#declare F = function(x) { x*2 }\n'
                    'camera { location <F(1), 1, -3> look_at <0,0,0> }\n')
-    r = povlens("convert", str(odd), "--lens", "dgauss.50mm", "--focus", "3", "-o",
+    r = povlens("convert", str(odd), "--lens", "dgauss.50mm", "--focus", "3", *small, "-o",
                 str(tmp_path / "m"))
     assert r.returncode == 2 and "--location" in r.stderr and "Traceback" not in r.stderr
     # ... and the options make it work
-    r = povlens("convert", str(odd), "--lens", "dgauss.50mm", "--focus", "3", "-o",
+    r = povlens("convert", str(odd), "--lens", "dgauss.50mm", "--focus", "3", *small, "-o",
                 str(tmp_path / "m"), "--location", "0,1,-3", "--look-at", "0,0,0")
     assert r.returncode == 0, r.stderr
 
