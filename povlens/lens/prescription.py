@@ -342,7 +342,11 @@ def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
        the axial gap ``t_i + s_(i+1)(r) - s_i(r)`` (the element's edge thickness, or
        the air gap between two elements).  The gap is monotonic in r for two spheres,
        so the root is bracketed on the crossing check's grid and bisected; both rows
-       are clipped to it (the element ends there, or the two elements touch there).
+       are clipped to it (the element ends there, or the two elements touch there),
+       except an aperture row (the stop, a field stop): its diameter is the design's,
+       so only the glass whose rim crosses its plane is clipped (lentil's 1927 Biotar,
+       entry 0009: the stop stays 45 mm, f/1.4367 as optical-design programs give it,
+       not 44.947 mm and f/1.4384).
 
     Pairs are taken front to back with the apertures clipped so far.  Gaps that close
     by no more than ``CROSSING_TOLERANCE_MM`` are kept (rounded data); faces that
@@ -376,7 +380,10 @@ def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
             continue
         glass = lens.index_after[i] != AIR
         for j, other in ((i, i + 1), (i + 1, i)):
-            if a[j] > meet:
+            # an aperture (the stop, a field stop) is never clipped: its diameter is the
+            # design's (the f-number), and a glass rim crossing its plane is clipped
+            # instead, as optical-design programs read the prescription
+            if a[j] > meet and not lens.is_aperture[j]:
                 a[j] = meet
                 why[j] = (f"the faces of the element ({lens.row_label(i)} to "
                           f"{lens.row_label(i + 1)}) meet" if glass else
