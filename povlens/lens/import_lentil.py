@@ -30,10 +30,11 @@ import dataclasses
 import json
 import math
 import os
+import warnings
 from pathlib import Path
 
 from povlens.errors import LensFileError, ParameterError
-from povlens.lens.import_common import ImportedLens, SourceRow, build_lens
+from povlens.lens.import_common import ImportedLens, LensImportWarning, SourceRow, build_lens
 from povlens.util.files import decode_text
 from povlens.lens.prescription import LensPrescription, read_source_bytes
 
@@ -219,8 +220,11 @@ def import_lentil(path: str | os.PathLike, lens_id: str, adjusted: bool = False)
         before_is_air = not rows or rows[-1].index_after == 1.0
         rows.append(_source_row(s, k, before_is_air, fail))
     if not any(_text(s.get("material")).strip().lower() == "iris" for s in table):
-        raise LensFileError(where, None, "has no iris row (the aperture stop)",
-                            "lentil marks the stop with material 'iris'")
+        # the optical-design convention: the surface that limits the axial beam is the
+        # stop (povlens.lens.paraxial finds it; its note says which)
+        warnings.warn(LensImportWarning(
+            f"{where}: no iris row: the surface that limits the axial beam is taken as "
+            f"the aperture stop"), stacklevel=2)
     return build_lens(rows, where, _header(path, lens_id, e, table_name))
 
 
@@ -232,7 +236,8 @@ def _header(path, lens_id: str, e: dict, table_name: str) -> list[str]:
     return [f"{design}{year}{patent}",
             f"source: lentil lens database {Path(path).name}, entry {lens_id}, {table_name}"
             + (f" (patent focal length {fl:g} mm)" if isinstance(fl, (int, float)) else ""),
-            "imported by povlens import-lens: the iris is the aperture stop; |radius| >= "
+            "imported by povlens import-lens: the iris is the aperture stop (without one, "
+            "the surface that limits the axial beam); |radius| >= "
             f"{FLAT_RADIUS_MM:g} is flat (radius 0); aperture = 2 x housing radius; one row "
             "per row of the table"]
 

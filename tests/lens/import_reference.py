@@ -42,17 +42,25 @@ def reference(surfaces, stop, stop_diameter):
 
 
 def lentil_system(path, lens_id, table="optical-elements-patent"):
-    """A lentil entry: |radius| >= 9999 flat, the iris the stop, air where ior is null."""
+    """A lentil entry: |radius| >= 9999 flat, the iris (any case) the stop, air where ior
+    is null.  Without an iris, the stop is the surface that limits the axial beam: the
+    largest ratio of the marginal ray's height to the semi-aperture (the housing radius,
+    or where a sphere ends)."""
     rows = json.load(open(path))[lens_id][table]
     surfaces, stop, stop_d = [], None, None
     for k, r in enumerate(rows):
         flat = abs(r["radius"]) >= 9999
-        if r["material"] == "iris":
+        if str(r["material"]).lower() == "iris":
             stop, stop_d = k, 2 * r["housing-radius"]
             n = surfaces[-1][2] if surfaces else 1.0
         else:
             n = 1.0 if r["ior"] in (None, 1) or r["material"] == "air" else r["ior"]
         surfaces.append((0.0 if flat else 1.0 / r["radius"], r["thickness"], n))
+    if stop is None:
+        heights, _, _ = trace(surfaces, 1.0, 0.0)
+        semi = [min(r["housing-radius"], abs(r["radius"])) for r in rows]
+        stop = max(range(len(rows)), key=lambda k: abs(heights[k]) / semi[k])
+        stop_d = 2 * semi[stop]
     return surfaces, stop, stop_d
 
 

@@ -141,7 +141,6 @@ def one_entry(tmp_path, **changes):
     ({"r4__aspherical_equation": [0.0, 1e-6, 0.0, 0.0]}, r"row 4: aspherical-equation"),
     ({"r2__thickness": [23.3, 20.0, 18.0]}, r"row 2: thickness is a list \(a zoom lens"),
     ({"r1__ior": "glass"}, r"row 1: ior is \"glass\", not a number"),
-    ({"r3__material": "air"}, r"no iris row"),
     ({"r5__thickness": -1.0}, r"row 5: thickness -1 mm is negative"),
 ])
 def test_rows_a_kolb_file_cannot_hold_are_refused_by_row(tmp_path, changes, match):
