@@ -191,7 +191,30 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReus
     _field_mesh(opts, plan, st, placement, table)
     apply_dispersion(opts, plan, lens, table)    # --dispersion: colour numbers, wider disc
     apply_aperture_shape(opts, plan, lens, table)  # iris/mask: notes, the iris's pupil domain
+    _radiosity_cache(opts, plan, st)
     return plan, table
+
+
+#: What a mesh plan of a scene with radiosity says it adds.
+RADIOSITY_CACHE_NOTE = (
+    "radiosity: its samples are computed once, by a pinhole render of the scene that saves "
+    "them (POV-Ray's Radiosity_File_Name with +RFO), and every lens sample reads them (+RFI) "
+    "instead of redoing the pretrace; the scene's radiosity settings are kept")
+
+
+def _radiosity_cache(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:
+    """Mark a mesh plan of a scene with radiosity for the shared radiosity samples
+    (:mod:`povlens.rendering.radiosity_cache`), unless the user's own POV-Ray options
+    name a radiosity file."""
+    if opts.sampling.method != "mesh" or "radiosity" not in st.scene_settings:
+        return
+    if any("radiosity_file" in o.lower() or o.lower().lstrip("+-").startswith("rf")
+           for o in st.povray.extra_options):
+        plan.add_note("radiosity: the POV-Ray options name a radiosity file, so each lens "
+                      "sample computes its own radiosity samples")
+        return
+    plan.povray = dataclasses.replace(plan.povray, radiosity_cache=True)
+    plan.add_note(RADIOSITY_CACHE_NOTE)
 
 
 def check_shift_sees_light(film: Film, table, lens_name: str) -> None:

@@ -82,6 +82,7 @@ class PlanStart:
     focus_from: str = "option"         # where it came from (Inputs.focus_from)
     povray: PovrayOptions = PovrayOptions()  # the user's POV-Ray options, checked
     notes: list[str] = dataclasses.field(default_factory=list)  # Plan.notes of the camera
+    scene_settings: tuple[str, ...] = ()   # the items of the scene's global_settings
 
 
 def start_plan(opts: ConvertOptions) -> PlanStart:
@@ -137,7 +138,8 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
         hfov_deg=math.degrees(2 * math.atan(0.5 * film.width_mm / model.image_distance_mm)))
     return PlanStart(mm_per_unit, lens, p, film, focus_mm, film_d, object_d, thick_d, spot,
                      model, loc, right, up, fwd, cam_source, camera, focus, focus_from,
-                     povray, camera_notes(cam, proportions) + _framing(cam, film, model, opts))
+                     povray, camera_notes(cam, proportions) + _framing(cam, film, model, opts),
+                     () if cam is None else tuple(cam.global_settings))
 
 
 def _framing(cam, film, model, opts) -> list[str]:

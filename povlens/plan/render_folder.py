@@ -12,6 +12,7 @@ A render folder (``povlens convert -o OUTDIR``) holds
 ``.speculative-focal-blur.pov/.exr``      ``--method auto``'s guessed view, while it runs
 ``exposure.txt``                          the composite's exposure 1 / (E/L)(0)
 ``illumination.json``                     the relative illumination of a field-mesh composite
+``radiosity.rca``                         the radiosity samples every lens sample reads
 ``image.exr``, ``image.png``              the image (linear float; sRGB preview)
 ``samples/batch_BBB.pov``                 the mesh method's batch wrappers
 ``samples/batch_BBB.done``                make's marker: batch b is rendered (its samples' files)
@@ -166,6 +167,12 @@ class RenderFolder:
     def exposure_txt(self) -> Path:
         """The composite's exposure (:meth:`read_exposure`)."""
         return self.path / "exposure.txt"
+
+    @property
+    def radiosity_cache(self) -> Path:
+        """The radiosity samples of one pinhole pretrace, which every lens sample reads
+        (:mod:`povlens.rendering.radiosity_cache`)."""
+        return self.path / "radiosity.rca"
 
     @property
     def illumination_json(self) -> Path:

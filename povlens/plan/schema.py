@@ -261,11 +261,16 @@ class PovraySettings:
     render_height: int
     drop_top_rows: int
     drop_right_columns: int = 0
+    #: The lens samples read the radiosity samples of one pinhole pretrace
+    #: (``RenderFolder.radiosity_cache``; :mod:`povlens.rendering.radiosity_cache`).
+    radiosity_cache: bool = False
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
         if not self.drop_right_columns:     # plans before field meshes had none
             del d["drop_right_columns"]
+        if not self.radiosity_cache:        # nor those before the shared radiosity
+            del d["radiosity_cache"]
         return d
 
 

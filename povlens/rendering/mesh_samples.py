@@ -51,6 +51,7 @@ from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_
 from povlens.rendering.pixel_sampler import pixel_sampler
 from povlens.util.files import write_text
 from povlens.util.images import write_exr
+from povlens.rendering.radiosity_cache import radiosity_cache_for, radiosity_read_args
 from povlens.util.signals import interrupts_deferred
 
 __all__ = ["render_samples", "render_batch", "sample_rows", "film_row_args",
@@ -166,6 +167,8 @@ class _SampleRenders:
         self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
         self.povray_s = 0.0
         self.povray_options = povray_options_of(plan.inputs)   # the user's, checked once
+        # the radiosity samples of one pretrace, made before the first sample if missing
+        self.radiosity = radiosity_read_args(radiosity_cache_for(plan, outdir), self.samples)
 
     def start(self, k: int) -> None:
         while len(self.running) >= self.limit:
@@ -182,7 +185,7 @@ class _SampleRenders:
                 "f.exr", pv.render_width, pv.render_height, threads=1,
                 library_paths=[Path(self.plan.inputs.scene).parent],
                 povray_options=self.povray_options,
-                extra_args=[*MESH_SWITCHES, f"Declare=PovlensFrame={k}",
+                extra_args=[*MESH_SWITCHES, *self.radiosity, f"Declare=PovlensFrame={k}",
                             *film_row_args(pv, render_rows(self.plan, k))])
             cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
             with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:

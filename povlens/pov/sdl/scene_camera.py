@@ -120,6 +120,8 @@ class SceneCamera:
     replaced : what of the scene's camera povlens's lens replaces or povlens ignores,
         one human-readable note each (empty for a plain perspective camera); see
         the module docstring.
+    global_settings : the items of the scene's ``global_settings`` blocks, sorted
+        (``"radiosity"``, ``"photons"``, ...; read on the way, not evaluated).
     """
 
     location: np.ndarray
@@ -138,6 +140,7 @@ class SceneCamera:
     focal_distance: float | None
     source: str
     replaced: list[str] = dataclasses.field(default_factory=list)
+    global_settings: tuple[str, ...] = ()
 
 
 def parse_scene_camera(
@@ -201,7 +204,8 @@ def parse_scene_camera(
         cam = CameraState(where=f"{path} (default camera)")
     extra = list(notes.get("replaced", []))
     found = dataclasses.replace(_world_camera(cam),
-                                replaced=extra + _notes(cam, image_width, image_height))
+                                replaced=extra + _notes(cam, image_width, image_height),
+                                global_settings=notes.get("global_settings", ()))
     if files is not None:
         # the folders too: a file added there may shadow an include found elsewhere
         watched = [*files, path.parent, *libs]
@@ -257,7 +261,8 @@ def _read_camera(path: Path, image_width, image_height, libs, clock, declares
     cam = reader.camera
     # the files read (None: an include was not found, which a new file could change)
     notes: dict = {"used": set(reader.stream.used_names),
-                   "files": None if reader.unread_includes else list(reader.included)}
+                   "files": None if reader.unread_includes else list(reader.included),
+                   "global_settings": tuple(sorted(reader.global_settings))}
     if cam is None:
         if reader.unread_includes:
             raise SceneCameraError(

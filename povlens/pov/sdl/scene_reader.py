@@ -64,6 +64,9 @@ class SceneReader:
         self.camera_frames: list[Frame] = []  # the loops the camera statement was read in
         self.previous_cam = CameraState()  # for language versions < 3.5
         self.camera_count = 0
+        #: The items of the scene's ``global_settings`` blocks (``radiosity``,
+        #: ``photons``, ``assumed_gamma`` ...), as far as they can be read.
+        self.global_settings: set[str] = set()
 
     @property
     def unread_includes(self) -> list[str]:
@@ -89,6 +92,9 @@ class SceneReader:
                     continue
                 if tok.text == "camera":
                     self._camera_statement(tok)
+                elif tok.text == "global_settings":
+                    ds.next()
+                    self._global_settings_block()
                 else:
                     ds.next()
                     ds.skip_rest()  # an object or other block
@@ -120,6 +126,23 @@ class SceneReader:
         self.camera = cam
         if isinstance(cam, CameraState):
             self.previous_cam = cam
+
+    def _global_settings_block(self) -> None:
+        """After its '{': the block's items (names at its top level) into
+        :attr:`global_settings`, to after its '}'."""
+        ds = self.stream
+        depth = 1
+        while depth:
+            try:
+                tok = ds.next()
+            except SdlEvalError:
+                continue            # a macro povlens cannot follow: its items are unknown
+            if tok.kind in ("eof", "stop"):
+                return
+            if tok.kind == "op" and tok.text in "{}":
+                depth += 1 if tok.text == "{" else -1
+            elif depth == 1 and tok.kind == "ident":
+                self.global_settings.add(tok.text)
 
     def _loop_abandoned(self, frame: Frame, reason: str) -> None:
         if any(f is frame for f in self.camera_frames) and isinstance(self.camera, CameraState):

@@ -1,0 +1,80 @@
+"""Radiosity computed once for all lens samples (issue 25, first step): a mesh plan of a
+scene with radiosity shares one pretrace's samples (``radiosity.rca``, POV-Ray's
+``+RFO`` then ``+RFI``); the image stays the uncached one within radiosity's noise."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from povlens.util.images import read_image
+
+pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
+
+RADIOSITY_SCENE = """#version 3.7;
+global_settings { assumed_gamma 1 radiosity { pretrace_start 0.08 pretrace_end 0.02
+  count 60 nearest_count 5 error_bound 0.8 recursion_limit 1 } }
+camera { location <0, 1.2, -3.5> look_at <0, 0.8, 0> }
+light_source { <1, 3, -2> rgb 1 }
+box { <-2, 0, -4>, <2, 3, 2> inverse pigment { rgb 0.8 } }
+box { <-2, 0, -4>, <-1.99, 3, 2> pigment { rgb <0.9, 0.1, 0.1> } }
+sphere { <0.3, 0.5, 0.2>, 0.5 pigment { rgb <0.2, 0.8, 0.3> } }
+"""
+SIZE = ("--width", "48", "--height", "36", "--lens", "dgauss.50mm", "--method", "mesh",
+        "--samples", "4", "-q")
+
+
+def _povlens(*args, cwd=None):
+    r = subprocess.run([sys.executable, "-m", "povlens", *map(str, args)], capture_output=True,
+                       text=True, timeout=300, cwd=cwd)
+    assert r.returncode == 0, r.stderr
+    return r
+
+
+def test_a_radiosity_scene_shares_one_pretrace_and_keeps_its_image(tmp_path):
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    _povlens("render", scene, *SIZE, "-o", tmp_path / "cached")
+    plan = json.loads((tmp_path / "cached" / "plan.json").read_text())
+    assert plan["povray"]["radiosity_cache"] is True
+    assert any(n.startswith("radiosity: its samples are computed once") for n in plan["notes"])
+    assert (tmp_path / "cached" / "radiosity.rca").stat().st_size > 0
+    # the user's own radiosity file option: every sample computes its own (the old way)
+    _povlens("render", scene, *SIZE, "--povray-option", "Radiosity_File_Name=own.rca",
+             "-o", tmp_path / "plain")
+    plain = json.loads((tmp_path / "plain" / "plan.json").read_text())
+    assert "radiosity_cache" not in plain["povray"]
+    assert not (tmp_path / "plain" / "radiosity.rca").exists()
+    a = read_image(tmp_path / "plain" / "image.exr")[..., :3]
+    b = read_image(tmp_path / "cached" / "image.exr")[..., :3]
+    assert a.mean() > 0.05
+    assert abs(b.mean() / a.mean() - 1.0) < 0.03            # radiosity's noise, not a bias
+    assert np.sqrt(np.mean((a - b) ** 2)) < 0.03 * a.max()
+
+
+def test_make_renders_with_the_shared_radiosity(tmp_path):
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    out = tmp_path / "o"
+    _povlens("convert", scene, *SIZE[:-1], "--batch-size", "2", "-o", out)
+    assert not (out / "radiosity.rca").exists()              # made by the first render
+    r = subprocess.run(["make", "-C", str(out), "-j2"], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert (out / "radiosity.rca").stat().st_size > 0 and (out / "image.exr").is_file()
+    assert not list(out.glob(".radiosity*")) and not list(out.glob(".*tmp*"))
+
+
+def test_a_scene_without_radiosity_renders_as_before(tmp_path):
+    scene = tmp_path / "plain.pov"
+    start = RADIOSITY_SCENE.index(" radiosity {")
+    scene.write_text(RADIOSITY_SCENE[:start] + " }\n" + RADIOSITY_SCENE.split("} }\n", 1)[1])
+    _povlens("convert", scene, *SIZE[:-1], "-o", tmp_path / "o")
+    plan = json.loads((tmp_path / "o" / "plan.json").read_text())
+    assert "radiosity_cache" not in plan["povray"]
+    assert not any(n.startswith("radiosity") for n in plan.get("notes", []))
