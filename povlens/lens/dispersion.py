@@ -10,6 +10,13 @@ through n_d at the helium d line (587.5618 nm) and with n_F - n_C = (n_d - 1) / 
 between the hydrogen F (486.1327 nm) and C (656.2725 nm) lines.  V_d = 0 (unknown)
 or V_d = inf gives B = 0: that medium does not disperse.  Air (index 1) never does.
 
+A medium that is a catalogue glass (``lens.glass``, :mod:`povlens.lens.glass_catalog`)
+follows its maker's formula instead, with its secondary spectrum:
+n(lambda) = n_d + n_cat(lambda) - n_cat(d), the row's stated n_d plus the catalogue's
+change from the d line (stated n_d and catalogue n_d agree to
+:data:`~povlens.lens.glass_catalog.ND_TOLERANCE`, or the name is not kept).
+:func:`dispersion_model` says which rows follow which model.
+
 The lens at a wavelength has the same geometry (radii, thicknesses, apertures):
 the film stays where the d-line focus put it, which is what makes longitudinal
 colour visible.  Chromatic aberration of a focused lens (lateral colour of the real
@@ -24,13 +31,14 @@ import math
 import numpy as np
 
 from povlens.lens.chief_ray import chief_rays
+from povlens.lens.glass_catalog import find_glass
 from povlens.lens.paraxial import image_of_object, paraxial_data
 from povlens.lens.prescription import AIR, LensPrescription
 from povlens.lens.tracer import trace_from_film
 
 __all__ = ["LINE_F_NM", "LINE_D_NM", "LINE_C_NM", "BAND_NM", "cauchy_coefficients", "index_at",
            "has_abbe_numbers", "disperses", "lens_at_wavelength", "chief_landing_mm", "chromatic_aberration",
-           "pass_radius_mm"]
+           "pass_radius_mm", "dispersion_model"]
 
 #: Fraunhofer lines (nm): hydrogen F, helium d, hydrogen C.
 LINE_F_NM, LINE_D_NM, LINE_C_NM = 486.1327, 587.5618, 656.2725
@@ -69,13 +77,13 @@ def has_abbe_numbers(lens: LensPrescription) -> bool:
     """True when some glass of ``lens`` has a known Abbe number (V_d != 0; inf counts:
     known not to disperse)."""
     glass = lens.index_after != AIR
-    return bool(np.any(glass & (lens.abbe_vd != 0.0)))
+    return bool(np.any(glass & (lens.abbe_vd != 0.0))) or any(lens.glass)
 
 
 def disperses(lens: LensPrescription) -> bool:
     """True when some glass has a finite, non-zero V_d (its index depends on lambda)."""
     v = lens.abbe_vd
-    return bool(np.any((lens.index_after != AIR) & (v > 0) & np.isfinite(v)))
+    return bool(np.any((lens.index_after != AIR) & (v > 0) & np.isfinite(v))) or any(lens.glass)
 
 
 def lens_at_wavelength(lens: LensPrescription, wavelength_nm: float) -> LensPrescription:
@@ -83,7 +91,8 @@ def lens_at_wavelength(lens: LensPrescription, wavelength_nm: float) -> LensPres
 
     Parameters
     ----------
-    lens : the lens (indices at the d line, Abbe numbers in ``abbe_vd``).
+    lens : the lens (indices at the d line, Abbe numbers in ``abbe_vd``, catalogue
+        glasses in ``glass``: those rows follow their formulas, the others Cauchy).
     wavelength_nm : vacuum wavelength, nm (> 0).
 
     Returns
@@ -95,7 +104,27 @@ def lens_at_wavelength(lens: LensPrescription, wavelength_nm: float) -> LensPres
         raise ValueError(f"wavelength {wavelength_nm!r} nm must be a positive number")
     if not disperses(lens):
         return lens
-    return lens.replace(index_after=index_at(lens.index_after, lens.abbe_vd, wavelength_nm))
+    n = index_at(lens.index_after, lens.abbe_vd, wavelength_nm)
+    for i, label in enumerate(lens.glass):
+        if label:
+            g = find_glass(label)
+            n[i] = lens.index_after[i] + (float(g.index_at(wavelength_nm)) - g.n_d)
+    return lens.replace(index_after=n)
+
+
+def dispersion_model(lens: LensPrescription) -> str:
+    """Which dispersion model each glass of ``lens`` follows, in words: the catalogue
+    formulas (rows and glasses named) and Cauchy (rows with a V_d, or none)."""
+    glass_rows = np.flatnonzero(lens.index_after != AIR)
+    named = [f"row {i} {lens.glass[i]}" for i in glass_rows if lens.glass and lens.glass[i]]
+    cauchy = [str(i) for i in glass_rows if not (lens.glass and lens.glass[i])]
+    parts = []
+    if named:
+        parts.append("catalogue formulas (secondary spectrum): " + ", ".join(named))
+    if cauchy:
+        parts.append(f"Cauchy from n_d and V_d: row{'s' if len(cauchy) > 1 else ''} "
+                     + ", ".join(cauchy))
+    return "; ".join(parts) or "no glass"
 
 
 def _chief_heights(lens, film_distance_mm, object_distance_mm, radii_mm):

@@ -25,14 +25,16 @@ import functools
 import importlib.util
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from povlens.errors import PovlensError
+from povlens.errors import LensFileError, PovlensError, PovlensWarning
 
 __all__ = ["CATALOGUES", "ND_TOLERANCE", "VD_TOLERANCE", "Glass", "UnknownGlassError",
-           "find_glass", "glass_label", "mismatch"]
+           "GlassWarning", "find_glass", "glass_label", "mismatch", "GLASS_DIRECTIVE",
+           "glass_directive", "with_glass_rows", "add_glass_directives"]
 
 #: Makers' catalogues (folders of the database's ``specs`` shelf), searched in order.
 CATALOGUES = ("SCHOTT", "OHARA", "HOYA", "CDGM", "HIKARI", "SUMITA")
@@ -207,3 +209,64 @@ def mismatch(glass: Glass, n_d: float, v_d: float) -> str | None:
     if v_d > 0 and math.isfinite(v_d) and abs(v_d - glass.v_d) > VD_TOLERANCE:
         why.append(f"V_d {v_d:.4g} (catalogue {glass.v_d:.2f})")
     return " and ".join(why) or None
+
+
+# ----- glass names in lens files -------------------------------------------------------
+
+#: A row's ``#!glass NAME`` (in the comment after the row's first ``#``).
+GLASS_DIRECTIVE = re.compile(r"(?:^|#)\s*!glass\s+([^\s#]+)", re.IGNORECASE)
+
+
+class GlassWarning(PovlensWarning):
+    """A glass name a lens file gives that is not used (unknown, on air, or not the
+    glass the stated index and Abbe number describe); names the file and line."""
+
+
+def glass_directive(comment: str, toks: list, source: str, lineno: int) -> str | None:
+    """The glass name of a ``#!glass NAME`` in a lens-file line's comment, or None.
+
+    Raises :class:`~povlens.errors.LensFileError` when it stands on a line without a row.
+    """
+    m = GLASS_DIRECTIVE.search(comment)
+    if m and not toks:
+        raise LensFileError(source, lineno, "'#!glass' stands on a line of its own",
+                            "put it at the end of the row whose medium (after the surface) "
+                            "is that glass")
+    return m[1] if m else None
+
+
+def with_glass_rows(lens, glass_rows: dict):
+    """``lens`` (a :class:`~povlens.lens.prescription.LensPrescription`) with the glasses
+    its file names: ``glass_rows`` maps row -> (name, line).  A name that is unknown,
+    on a row whose medium is air, or whose glass the row's stated n_d (and V_d) do not
+    match (:func:`mismatch`) is dropped with a :class:`GlassWarning`; the indices stay."""
+    if not glass_rows:
+        return lens
+    labels = [""] * lens.n_surfaces
+    for row, (name, line) in sorted(glass_rows.items()):
+        where = f"{lens.source}:{line}: row {row}"
+        why = None
+        if lens.index_after[row] == 1.0:
+            why = f"glass {name} is named but the medium after the surface is air"
+        else:
+            try:
+                g = find_glass(name)
+            except UnknownGlassError as e:
+                why = f"{e.message} ({e.hint})"
+            else:
+                off = mismatch(g, float(lens.index_after[row]), float(lens.abbe_vd[row]))
+                why = off and f"the row states {off}, not glass {g.label}"
+                labels[row] = "" if off else g.label
+        if why:
+            warnings.warn(GlassWarning(f"{where}: {why}; its dispersion is the Cauchy model "
+                                       f"of the stated n_d and V_d"), stacklevel=3)
+    return lens.replace(glass=tuple(labels)) if any(labels) else lens
+
+
+def add_glass_directives(out: list[str], lens) -> None:
+    """Append ``\\t#!glass LABEL`` to the rows of a formatted lens (the last
+    ``lens.n_surfaces`` lines of ``out``) whose medium is a catalogue glass."""
+    n = lens.n_surfaces
+    for i, label in enumerate(lens.glass):
+        if label:
+            out[len(out) - n + i] += f"\t#!glass {label}"

@@ -51,6 +51,7 @@ class SourceRow:
         (``"surface 4 (line 120)"``, ``"row 7"``).
     note : the per-row comment written to the file (material, what the row is).
     line : the row's line in the source file, if known (for error messages).
+    glass : the catalogue glass after the surface (``SCHOTT:N-BK7``), or "" (none).
     """
 
     radius_mm: float
@@ -61,6 +62,7 @@ class SourceRow:
     label: str
     note: str
     line: int | None = None
+    glass: str = ""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -213,6 +215,8 @@ def build_lens(rows: list[SourceRow], source: str, comments: list[str]) -> Impor
     # ``lines`` point into the source file, so row labels in messages name its lines.
     lens = LensPrescription(radius, thick, index, diam, abbe, source=source,
                             lines=tuple(r.line or 0 for r in rows), comments=tuple(comments))
+    if any(r.glass for r in rows):
+        lens = lens.replace(glass=tuple(r.glass for r in rows))
     lens = clip_to_physical_apertures(lens)
     ap = lens.is_aperture
     if ap.any():

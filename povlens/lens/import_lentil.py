@@ -34,6 +34,7 @@ import warnings
 from pathlib import Path
 
 from povlens.errors import LensFileError, ParameterError
+from povlens.lens import glass_catalog
 from povlens.lens.import_common import ImportedLens, LensImportWarning, SourceRow, build_lens
 from povlens.util.files import decode_text
 from povlens.lens.prescription import LensPrescription, read_source_bytes
@@ -167,6 +168,29 @@ def _source_row(s: dict, k: int, before_is_air: bool, fail) -> SourceRow:
                      f"row {k}", note)
 
 
+def _with_glass(row: SourceRow, s: dict, where: str) -> SourceRow:
+    """``row`` with its catalogue glass (:mod:`povlens.lens.glass_catalog`) when the
+    table's ``material`` names one (``SF5``, ``SLAH59`` for OHARA's S-LAH59) whose n_d
+    and V_d match the row's ior and abbe: those stay as stated, the glass gives
+    ``--dispersion`` its formula.  An unknown name keeps the Cauchy model (noted in the
+    row); a glass the stated values do not match is not kept, with a warning."""
+    material = _text(s.get("material")).strip()
+    if row.index_after == 1.0 or material.lower() in ("", "air", "iris", "abbe"):
+        return row
+    try:
+        g = glass_catalog.find_glass(material)
+    except glass_catalog.UnknownGlassError:
+        return dataclasses.replace(row, note=f"{row.note} (not in the glass catalogues)")
+    off = glass_catalog.mismatch(g, row.index_after, row.abbe_vd)
+    if off:
+        warnings.warn(LensImportWarning(
+            f"{where}: {row.label}: material {material}: the table states {off}, not "
+            f"catalogue glass {g.label}; its dispersion is the Cauchy model of the stated "
+            f"values"), stacklevel=3)
+        return row
+    return dataclasses.replace(row, glass=g.label)
+
+
 def import_lentil(path: str | os.PathLike, lens_id: str, adjusted: bool = False) -> ImportedLens:
     """Entry ``lens_id`` of a lentil database as an :class:`ImportedLens`.
 
@@ -218,7 +242,7 @@ def import_lentil(path: str | os.PathLike, lens_id: str, adjusted: bool = False)
         if not isinstance(s, dict):
             fail("is not an object of surface data")
         before_is_air = not rows or rows[-1].index_after == 1.0
-        rows.append(_source_row(s, k, before_is_air, fail))
+        rows.append(_with_glass(_source_row(s, k, before_is_air, fail), s, where))
     if not any(_text(s.get("material")).strip().lower() == "iris" for s in table):
         # the optical-design convention: the surface that limits the axial beam is the
         # stop (povlens.lens.paraxial finds it; its note says which)

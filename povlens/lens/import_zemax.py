@@ -27,7 +27,11 @@ Conversion to a Kolb/pbrt file (all lengths to mm):
   a catalogue name with the nd and vd the line gives; a 6-digit glass code
   (``517642`` -> nd 1.517, vd 64.2); ``glasses`` (name -> (nd, vd)) overrides all.
   A catalogue glass whose line holds Zemax's placeholder (nd 1.5, vd 40) has no index
-  in the file and povlens has no catalogue: refused unless ``glasses`` gives it;
+  in the file: nd and vd come from the glass catalogue (:mod:`povlens.lens.glass_catalog`,
+  SCHOTT, OHARA, HOYA, CDGM, HIKARI, SUMITA); a name no catalogue holds is refused,
+  naming the closest, unless ``glasses`` gives it.  A row whose glass the catalogue
+  holds (and whose nd, vd match it) is written with ``#!glass MAKER:NAME``, which gives
+  ``--dispersion`` the catalogue formula;
 * the STOP becomes a plane in air (an aperture row): a flat stop surface in air as it
   is; a stop on a lens face gets a plane in the air beside it, in the vertex plane
   when the face is flat or convex toward that air (paraxially exact), else in the
@@ -49,6 +53,7 @@ import warnings
 from pathlib import Path
 
 from povlens.errors import LensFileError
+from povlens.lens import glass_catalog
 from povlens.lens.import_common import ImportedLens, LensImportWarning, SourceRow, build_lens
 from povlens.lens.prescription import LensPrescription, read_source_bytes, sag_mm
 from povlens.util.files import decode_text
@@ -279,9 +284,47 @@ def _medium(s: ZmxSurface, glasses: dict) -> tuple[float, float, str] | None:
     if code and (math.isnan(nd) or (nd, vd) == PLACEHOLDER_ND_VD):
         nd, vd = 1.0 + int(code[1]) / 1000.0, int(code[2]) / 10.0  # glass code: 517642
     elif math.isnan(nd) or (name != "___BLANK" and (nd, vd) == PLACEHOLDER_ND_VD):
-        return None
+        return _catalogue_medium(name)
     label = "model glass" if name == "___BLANK" else name
     return nd, (vd if math.isfinite(vd) and vd > 0 else 0.0), label
+
+
+def _closest(name: str) -> str:
+    """The catalogue's hint for an unknown glass name (closest known names)."""
+    try:
+        glass_catalog.find_glass(name)
+    except glass_catalog.UnknownGlassError as e:
+        return (e.hint or "").split("; or ")[0]
+    return ""
+
+
+def _catalogue_medium(name: str) -> tuple[float, float, str] | None:
+    """(nd, vd, label) of catalogue glass ``name`` from its formula; None if unknown."""
+    try:
+        g = glass_catalog.find_glass(name)
+    except glass_catalog.UnknownGlassError:
+        return None
+    return g.n_d, g.v_d, f"{name} (catalogue {g.label})"
+
+
+def _row_glass(s: ZmxSurface, nd: float, vd: float, glasses: dict, source: str) -> str:
+    """The catalogue label (``SCHOTT:N-BK7``) of the glass after ``s``, or "" (air, a
+    model glass, a glass code, one ``glasses`` gives, or not in the catalogues); a
+    glass whose nd, vd differ from the catalogue's is not kept, with a warning."""
+    name = s.glass[0] if s.glass else "AIR"
+    if (name.upper() in ("AIR", "___BLANK") or re.fullmatch(r"[\d.]+", name)
+            or name in glasses or name.upper() in glasses):
+        return ""
+    try:
+        g = glass_catalog.find_glass(name)
+    except glass_catalog.UnknownGlassError:
+        return ""
+    off = glass_catalog.mismatch(g, nd, vd)
+    if off:
+        _warn(source, s, f"glass {name}: the file states {off}, not catalogue glass "
+                         f"{g.label}; its dispersion is the Cauchy model of the stated values")
+        return ""
+    return g.label
 
 
 def _media(lens: list[ZmxSurface], glasses: dict, source: str) -> list[tuple[float, float, str]]:
@@ -295,8 +338,8 @@ def _media(lens: list[ZmxSurface], glasses: dict, source: str) -> list[tuple[flo
             source, missing[0].glass_line,
             f"surface{'s' if len(missing) > 1 else ''} {where}: glass "
             f"{', '.join(names)} has no refractive index in the file (only Zemax's "
-            f"placeholder nd 1.5, vd 40) and povlens has no glass catalogue",
-            f"give its catalogue nd (and vd) with 'glasses': {names[0]}=ND,VD")
+            f"placeholder nd 1.5, vd 40) and is in no glass catalogue povlens has",
+            f"{_closest(names[0])}; or give its nd (and vd) with 'glasses': {names[0]}=ND,VD")
     for s, m in zip(lens, media):
         if not 1.0 <= m[0] <= 10.0:
             raise LensFileError(source, s.glass_line,
@@ -385,6 +428,7 @@ def _lens_rows(f: ZmxFile, glasses: dict, source: str) -> tuple[list[SourceRow],
         what = "air" if after_air else f"{name} nd {nd:g}" + (f" vd {vd:g}" if vd else "")
         note = f"surface {s.number}: {what}" + (f"; {s.comment}" if s.comment else "")
         row = SourceRow(radius, t, nd, 2 * s.aperture_radius * k, vd, s.label, note, s.line)
+        row = dataclasses.replace(row, glass=_row_glass(s, nd, vd, glasses, source))
         if s.stop:
             new, shrink = _stop_rows(s, k, before_air, after_air, row, source)
             if shrink and rows:

@@ -17,6 +17,9 @@ File format (pbrt / Kolb et al. 1995), one row per surface, object side first:
 * An optional 5th column carries the Abbe number V_d of the medium after the
   surface (kept for dispersion; 0 = unknown).
 * ``#`` starts a comment anywhere on a line; tabs or spaces; LF or CRLF.
+* A row's comment may hold ``#!glass NAME`` (``#!glass SCHOTT:N-BK7``): the medium
+  after the surface is that catalogue glass (:mod:`povlens.lens.glass_catalog`), whose
+  formula gives ``--dispersion`` its n(lambda); the row's index stays as stated.
 
 The old Kolb / CS348B tables (100 mm scale: ``dgauss.dat``, ``wide.dat``) store
 in column 2 the distance from the *previous* vertex.  They are recognised by
@@ -36,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from povlens.errors import LensClipWarning, LensFileError
+from povlens.lens import glass_catalog as _gc
 from povlens.util.files import decode_text
 from povlens.util.resources import LENS_DIR
 from povlens.util.files import write_bytes
@@ -102,6 +106,9 @@ class LensPrescription:
     #: ``aperture_shape_row``, or None for round apertures; not part of :meth:`sha256`.
     aperture_shape: object | None = None
     aperture_shape_row: int = -1
+    #: Catalogue glass per row (``SCHOTT:N-BK7``; ``""`` none), or () when no row
+    #: names one (:mod:`povlens.lens.glass_catalog`); not part of :meth:`sha256`.
+    glass: tuple[str, ...] = ()
 
     # ----- derived geometry ------------------------------------------------
     @property
@@ -179,7 +186,7 @@ class LensPrescription:
         return self.replace(radius_mm=self.radius_mm[sl], thickness_mm=self.thickness_mm[sl],
                             index_after=self.index_after[sl] / self.index_before[first],
                             aperture_diameter_mm=self.aperture_diameter_mm[sl],
-                            abbe_vd=self.abbe_vd[sl], lines=self.lines[sl],
+                            abbe_vd=self.abbe_vd[sl], lines=self.lines[sl], glass=self.glass[sl],
                             **_shape_rows(self, first))
 
     def __eq__(self, other) -> bool:  # optical equality, used by round-trip tests
@@ -266,9 +273,13 @@ def parse_lens_text(text: str, source: str = "<string>") -> LensPrescription:
     rows: list[list[float]] = []
     lines: list[int] = []
     comments: list[str] = []
+    glass_rows: dict[int, tuple[str, int]] = {}     # row -> (#!glass name, line)
     for lineno, line in enumerate(text.splitlines(), start=1):
         body, sep, comment = line.partition("#")
         toks = body.split()
+        glass_name = _gc.glass_directive(comment, toks, source, lineno)
+        if glass_name:
+            glass_rows[len(rows)] = (glass_name, lineno)
         if not toks:
             if sep and not rows:
                 comments.append(comment.strip())
@@ -324,6 +335,7 @@ def parse_lens_text(text: str, source: str = "<string>") -> LensPrescription:
 
     lens = LensPrescription(radius, thick, index, diam, abbe, source=source, lines=tuple(lines),
                             file_format=file_format, comments=tuple(comments))
+    lens = _gc.with_glass_rows(lens, glass_rows)
     lens = clip_to_physical_apertures(lens)
     ap = lens.is_aperture
     if ap.any():
@@ -472,6 +484,7 @@ def format_lens(lens: LensPrescription) -> str:
         if with_abbe:
             cols.append(lens.abbe_vd[i])
         out.append("\t".join(f"{v:.17g}" for v in cols))
+    _gc.add_glass_directives(out, lens)
     return "\n".join(out) + "\n"
 
 

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from povlens.lens.dispersion import (BAND_NM, chromatic_aberration, disperses,
-                                     has_abbe_numbers, lens_at_wavelength)
+from povlens.lens.dispersion import (BAND_NM, chromatic_aberration, dispersion_model,
+                                     disperses, has_abbe_numbers, lens_at_wavelength)
 from povlens.plan.decision import MIN_SAMPLES
 from povlens.pupil.band_table import band_dilation
 
@@ -44,14 +44,17 @@ def apply_dispersion(opts, plan, lens, table) -> None:
         return
     if not has_abbe_numbers(lens):
         plan.add_note(f"--dispersion: the lens file {lens.source} gives no Abbe numbers "
-                      f"(5th column V_d), so it renders without dispersion")
+                      f"(5th column V_d) nor catalogue glasses ('#!glass NAME'), so it "
+                      f"renders without dispersion")
         return
     film, focus = plan.film, plan.focus
     info = chromatic_aberration(lens, focus.film_distance_mm,
                                 focus.object_distance_from_film_mm, film.max_field_radius_mm,
                                 film.pixel_pitch_mm)
-    info.update(rendered=False, band_nm=list(BAND_NM), model=COLOUR_MODEL)
+    info.update(rendered=False, band_nm=list(BAND_NM),
+                model=f"{dispersion_model(lens)}; {COLOUR_MODEL}")
     plan.dispersion = info
+    plan.add_note(f"--dispersion: {dispersion_model(lens)}")
     colour = (f"lateral colour up to {info['max_lateral_colour_px']:.2g} px, longitudinal "
               f"{info['longitudinal_colour_mm'] or 0.0:.2g} mm")
     if opts.sampling.method != "mesh":
