@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from povlens.errors import LensFileError, OpticsError, ParameterError, PovlensWarning
+from povlens.lens.asphere import N_ASPHERE, scaled_asphere
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import (AIR, MAX_INDEX, MAX_LENGTH_MM, MIN_LENGTH_MM,
                                        LensPrescription, clip_to_physical_apertures,
@@ -52,6 +53,8 @@ class SourceRow:
     note : the per-row comment written to the file (material, what the row is).
     line : the row's line in the source file, if known (for error messages).
     glass : the catalogue glass after the surface (``SCHOTT:N-BK7``), or "" (none).
+    asphere : None for a sphere, else 9 floats: conic k, a2 .. a16
+        (:mod:`povlens.lens.asphere`).
     """
 
     radius_mm: float
@@ -62,6 +65,7 @@ class SourceRow:
     label: str
     note: str
     line: int | None = None
+    asphere: tuple | None = None
     glass: str = ""
 
 
@@ -107,6 +111,7 @@ class ImportedLens:
         scaled = lens.replace(
             radius_mm=lens.radius_mm * k, thickness_mm=lens.thickness_mm * k,
             aperture_diameter_mm=lens.aperture_diameter_mm * k,
+            asphere=scaled_asphere(lens.asphere, k),
             max_stop_diameter_mm=(None if lens.max_stop_diameter_mm is None
                                   else lens.max_stop_diameter_mm * k),
             comments=lens.comments + (f"scaled x{k:.9g} from EFL {efl:.9g} mm to "
@@ -213,8 +218,13 @@ def build_lens(rows: list[SourceRow], source: str, comments: list[str]) -> Impor
     radius, thick, index, diam, abbe = a.T.copy()
     # Planes in air on both sides are apertures; their index column is air by definition.
     # ``lines`` point into the source file, so row labels in messages name its lines.
+    asph = None
+    if any(r.asphere is not None and any(r.asphere) for r in rows):
+        asph = np.array([r.asphere if r.asphere is not None else (0.0,) * N_ASPHERE
+                         for r in rows], dtype=np.float64)
     lens = LensPrescription(radius, thick, index, diam, abbe, source=source,
-                            lines=tuple(r.line or 0 for r in rows), comments=tuple(comments))
+                            lines=tuple(r.line or 0 for r in rows), comments=tuple(comments),
+                            asphere=asph)
     if any(r.glass for r in rows):
         lens = lens.replace(glass=tuple(r.glass for r in rows))
     lens = clip_to_physical_apertures(lens)

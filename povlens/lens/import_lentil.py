@@ -21,7 +21,12 @@ Conversion to a Kolb/pbrt file:
   :func:`~povlens.lens.prescription.clip_to_physical_apertures`);
 * ior null or material ``air`` -> air; the glass index and Abbe number go to the 4th
   and 5th columns;
-* aspheres, cylinders and zoom thickness lists are refused, naming the row.
+* ``lens-geometry: "aspherical"`` with ``aspherical-equation`` [A4, A6, A8, A10] (the
+  coefficients of r^4 .. r^10, conic 0, the patents' convention: sag positive toward
+  the image) is an even asphere (:mod:`povlens.lens.asphere`), written as the row's
+  ``#!asphere`` comment.  (lentil's own loader reads only A4 and A8 and traces with a
+  conic constant of 1; povlens takes the table as the patent states it.)
+* cylinders and zoom thickness lists are refused, naming the row.
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from pathlib import Path
 
 from povlens.errors import LensFileError, ParameterError
 from povlens.lens import glass_catalog
+from povlens.lens.asphere import N_ASPHERE
 from povlens.lens.import_common import ImportedLens, LensImportWarning, SourceRow, build_lens
 from povlens.util.files import decode_text
 from povlens.lens.prescription import LensPrescription, read_source_bytes
@@ -134,14 +140,10 @@ def _source_row(s: dict, k: int, before_is_air: bool, fail) -> SourceRow:
     """Row ``k`` of the table as a :class:`SourceRow` (``fail(reason)`` raises)."""
     material = _text(s.get("material")).strip() or "?"
     geometry = s.get("lens-geometry", "spherical")
-    if geometry not in (None, "spherical"):
-        fail(f"lens-geometry '{geometry}' (material {material}): a Kolb lens file holds "
-             f"spherical surfaces only", "pick a design whose surfaces are all spherical")
-    asph = s.get("aspherical-equation")
-    if asph is not None and not (isinstance(asph, list)
-                                 and all(isinstance(a, (int, float)) and a == 0 for a in asph)):
-        fail(f"aspherical-equation {json.dumps(asph)}: a Kolb lens file holds spherical "
-             f"surfaces only", "pick a design whose surfaces are all spherical")
+    if geometry not in (None, "spherical", "aspherical"):
+        fail(f"lens-geometry '{geometry}' (material {material}): povlens holds spherical "
+             f"and even-aspheric surfaces only", "pick a design without cylinders")
+    asph = _lentil_asphere(s.get("aspherical-equation"), fail)
     if isinstance(s.get("thickness"), list):
         fail("thickness is a list (a zoom lens: it changes with the zoom position); povlens "
              "imports fixed focal lengths only")
@@ -164,8 +166,24 @@ def _source_row(s: dict, k: int, before_is_air: bool, fail) -> SourceRow:
         shown = "glass" if material.lower() == "abbe" else material
         what = f"{shown} nd {index:g}" + (f" vd {abbe:g}" if abbe else "")
     note = what + (f"; flat (radius {radius:g} in the source)" if flat and radius else "")
+    if asph is not None:
+        note += "; asphere"
     return SourceRow(0.0 if flat else radius, thickness, index, 2 * housing, abbe,
-                     f"row {k}", note)
+                     f"row {k}", note, asphere=asph)
+
+
+def _lentil_asphere(eq, fail) -> tuple | None:
+    """(k, a2 .. a16) of an ``aspherical-equation`` [A4, A6, A8, A10] (fewer: the rest 0),
+    None for null or all zeros."""
+    if eq is None:
+        return None
+    if not (isinstance(eq, list) and len(eq) <= N_ASPHERE - 2):
+        fail(f"aspherical-equation {json.dumps(eq)} is not a list of at most "
+             f"{N_ASPHERE - 2} numbers (the coefficients of r^4, r^6, ...)")
+    coef = [_number(a, f"aspherical-equation[{j}]", fail) for j, a in enumerate(eq)]
+    if not any(coef):
+        return None
+    return (0.0, 0.0) + tuple(coef) + (0.0,) * (N_ASPHERE - 2 - len(coef))
 
 
 def _with_glass(row: SourceRow, s: dict, where: str) -> SourceRow:

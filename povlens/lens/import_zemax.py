@@ -38,9 +38,13 @@ Conversion to a Kolb/pbrt file (all lengths to mm):
   plane of the face's rim at the stop radius, with a :class:`LensImportWarning`;
 * surfaces in air on both sides other than the stop (Zemax's dummy surfaces) have no
   power and are dropped, their thickness added to the gap before them;
-* refused, naming the surface: surface types other than STANDARD (and EVENASPH with
-  all aspheric terms zero), conic constants, mirrors, tilts and decenters, a stop
-  inside glass, a file without STOP.
+* ``TYPE EVENASPH`` (``PARM 1..8`` the coefficients of r^2 .. r^16) and ``CONI`` (on
+  STANDARD or EVENASPH) make an even asphere (:mod:`povlens.lens.asphere`), written as
+  the row's ``#!asphere`` comment; the coefficients are converted to mm
+  (a_2i x unit^(1 - 2i));
+* refused, naming the surface: surface types other than STANDARD and EVENASPH, other
+  PARMs of an EVENASPH, mirrors, tilts and decenters, a stop inside glass or on an
+  aspheric face, a file without STOP.
 """
 
 from __future__ import annotations
@@ -52,8 +56,11 @@ import re
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from povlens.errors import LensFileError
 from povlens.lens import glass_catalog
+from povlens.lens.asphere import N_ASPHERE, scaled_asphere
 from povlens.lens.import_common import ImportedLens, LensImportWarning, SourceRow, build_lens
 from povlens.lens.prescription import LensPrescription, read_source_bytes, sag_mm
 from povlens.util.files import decode_text
@@ -247,19 +254,16 @@ def _check_shape(s: ZmxSurface, source: str) -> None:
     if s.glass and s.glass[0].upper() == "MIRROR":
         refuse("a mirror (GLAS MIRROR); povlens imports refracting lenses only")
     if s.type == "EVENASPH":
-        terms = {k: v for k, v in s.parms.items() if v != 0}
-        if terms:
-            shown = ", ".join(f"PARM {k} = {v:g}" for k, v in sorted(terms.items()))
-            refuse(f"an even asphere with non-zero aspheric terms ({shown})")
+        other = {k: v for k, v in s.parms.items() if v != 0 and not 1 <= k <= N_ASPHERE - 1}
+        if other:
+            shown = ", ".join(f"PARM {k} = {v:g}" for k, v in sorted(other.items()))
+            refuse(f"an even asphere with terms beyond r^16 ({shown}); PARM 1..8 are read")
     elif s.type == "COORDBRK":
         refuse("a coordinate break (tilts or decenters the axis)")
     elif s.type == "PARAXIAL":
         refuse("a paraxial (ideal thin) lens surface")
     elif s.type != "STANDARD":
-        refuse(f"surface type {s.type}; povlens imports STANDARD surfaces (and EVENASPH with "
-               f"all aspheric terms zero)")
-    if s.conic != 0 and s.curvature != 0:
-        refuse(f"conic constant {s.conic:g} (a conic is not a sphere)")
+        refuse(f"surface type {s.type}; povlens imports STANDARD and EVENASPH surfaces")
     if s.tilted:
         refuse(f"tilted or decentered (SCBD, line {s.tilted})")
     if s.thickness is not None and math.isinf(s.thickness):
@@ -391,6 +395,17 @@ def _stop_rows(s: ZmxSurface, k: float, before_air: bool, after_air: bool, row: 
     return [face, dataclasses.replace(stop, thickness_mm=row.thickness_mm - shift)], 0.0
 
 
+def _zmx_asphere(s: ZmxSurface, k: float) -> tuple | None:
+    """(conic, a2 .. a16) in mm of ``s`` (lens unit ``k`` mm), None for a sphere."""
+    if s.curvature == 0 and s.type != "EVENASPH":
+        return None                       # a conic of a plane is a plane
+    terms = [s.conic] + ([s.parms.get(j, 0.0) for j in range(1, N_ASPHERE)]
+                         if s.type == "EVENASPH" else [0.0] * (N_ASPHERE - 1))
+    if not any(terms):
+        return None
+    return tuple(float(v) for v in scaled_asphere(np.array(terms, dtype=np.float64), k))
+
+
 def _lens_rows(f: ZmxFile, glasses: dict, source: str) -> tuple[list[SourceRow], list[int]]:
     """The rows to write, and the numbers of the dummy surfaces dropped."""
     lens = f.surfaces[1:-1]
@@ -427,7 +442,13 @@ def _lens_rows(f: ZmxFile, glasses: dict, source: str) -> tuple[list[SourceRow],
         radius = 1.0 / s.curvature * k if s.curvature != 0 else 0.0
         what = "air" if after_air else f"{name} nd {nd:g}" + (f" vd {vd:g}" if vd else "")
         note = f"surface {s.number}: {what}" + (f"; {s.comment}" if s.comment else "")
-        row = SourceRow(radius, t, nd, 2 * s.aperture_radius * k, vd, s.label, note, s.line)
+        asph = _zmx_asphere(s, k)
+        row = SourceRow(radius, t, nd, 2 * s.aperture_radius * k, vd, s.label,
+                        note + ("; asphere" if asph else ""), s.line, asph)
+        if s.stop and asph and not (before_air and after_air):
+            raise LensFileError(source, s.line, f"{s.label}: the stop lies on an aspheric "
+                                f"face", "move the STOP to a plane in the air beside it in the "
+                                "design program")
         row = dataclasses.replace(row, glass=_row_glass(s, nd, vd, glasses, source))
         if s.stop:
             new, shrink = _stop_rows(s, k, before_air, after_air, row, source)

@@ -3,7 +3,8 @@
 Rays are meridional pairs (y, n u): height y in mm and reduced angle n u
 (refractive index times the slope dy/ds), travelling from the scene (front
 vertex) to the film.  Each surface of curvature c between indices n and n'
-refracts with ``R = [[1, 0], [-(n' - n) c, 1]]``; a gap of thickness t in index
+refracts with ``R = [[1, 0], [-(n' - n) c, 1]]`` (an even asphere: its base
+curvature plus twice its r^2 coefficient, :mod:`povlens.lens.asphere`); a gap of thickness t in index
 n' transfers with ``T = [[1, t / n'], [0, 1]]`` (Hecht, *Optics*, §6.2; the
 y-nu method of Smith, *Modern Optical Engineering*, ch. 3).  The system matrix
 from the front vertex to the rear vertex, ``[[A, B], [C, D]]``, gives
@@ -24,6 +25,7 @@ import warnings
 import numpy as np
 
 from povlens.errors import NominalFNumberWarning, OpticsError, ParameterError, UsageError
+from povlens.lens.asphere import paraxial_curvature_per_mm
 from povlens.lens.prescription import LensPrescription
 
 __all__ = ["ParaxialData", "paraxial_data", "system_matrix", "axial_ray_heights",
@@ -51,7 +53,7 @@ def system_matrix(lens: LensPrescription, first: int = 0, last: int | None = Non
     surface ``last`` before it refracts (used to reach the stop plane).
     """
     last = lens.n_surfaces - 1 if last is None else last
-    c = lens.curvature_per_mm
+    c = paraxial_curvature_per_mm(lens)      # base curvature (+ 2 a2 on aspheres)
     nb, na = lens.index_before, lens.index_after
     m = np.eye(2)
     for i in range(first, last + 1):
@@ -64,7 +66,7 @@ def system_matrix(lens: LensPrescription, first: int = 0, last: int | None = Non
 
 def axial_ray_heights(lens: LensPrescription) -> np.ndarray:
     """Heights (mm) at every surface of the paraxial ray entering parallel at y = 1."""
-    c = lens.curvature_per_mm
+    c = paraxial_curvature_per_mm(lens)      # base curvature (+ 2 a2 on aspheres)
     nb, na = lens.index_before, lens.index_after
     y, nu = 1.0, 0.0
     out = np.empty(lens.n_surfaces)

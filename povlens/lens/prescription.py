@@ -20,6 +20,8 @@ File format (pbrt / Kolb et al. 1995), one row per surface, object side first:
 * A row's comment may hold ``#!glass NAME`` (``#!glass SCHOTT:N-BK7``): the medium
   after the surface is that catalogue glass (:mod:`povlens.lens.glass_catalog`), whose
   formula gives ``--dispersion`` its n(lambda); the row's index stays as stated.
+* A row may end with ``#!asphere k=.. a4=..``: the row is an even asphere of base
+  radius ``radius`` (:mod:`povlens.lens.asphere`; other Kolb readers see the sphere).
 
 The old Kolb / CS348B tables (100 mm scale: ``dgauss.dat``, ``wide.dat``) store
 in column 2 the distance from the *previous* vertex.  They are recognised by
@@ -40,6 +42,7 @@ import numpy as np
 
 from povlens.errors import LensClipWarning, LensFileError
 from povlens.lens import glass_catalog as _gc
+from povlens.lens import asphere as _asph
 from povlens.util.files import decode_text
 from povlens.util.resources import LENS_DIR
 from povlens.util.files import write_bytes
@@ -109,6 +112,9 @@ class LensPrescription:
     #: Catalogue glass per row (``SCHOTT:N-BK7``; ``""`` none), or () when no row
     #: names one (:mod:`povlens.lens.glass_catalog`); not part of :meth:`sha256`.
     glass: tuple[str, ...] = ()
+    #: Even-asphere data (n_surfaces, 9): conic k, a2 .. a16 (:mod:`povlens.lens.asphere`),
+    #: or None when every row is a sphere; zero rows are spheres.
+    asphere: np.ndarray | None = None
 
     # ----- derived geometry ------------------------------------------------
     @property
@@ -150,6 +156,8 @@ class LensPrescription:
         h = hashlib.sha256()
         for a in (self.radius_mm, self.thickness_mm, self.index_after, self.aperture_diameter_mm):
             h.update(np.ascontiguousarray(a, dtype="<f8").tobytes())
+        if _asph.aspheric_rows(self).any():     # spherical lenses keep their old hashes
+            h.update(b"asphere" + np.ascontiguousarray(self.asphere, dtype="<f8").tobytes())
         return h.hexdigest()
 
     # ----- modified copies ----------------------------------------------------
@@ -187,6 +195,7 @@ class LensPrescription:
                             index_after=self.index_after[sl] / self.index_before[first],
                             aperture_diameter_mm=self.aperture_diameter_mm[sl],
                             abbe_vd=self.abbe_vd[sl], lines=self.lines[sl], glass=self.glass[sl],
+                            asphere=None if self.asphere is None else self.asphere[sl],
                             **_shape_rows(self, first))
 
     def __eq__(self, other) -> bool:  # optical equality, used by round-trip tests
@@ -196,9 +205,17 @@ class LensPrescription:
             (self.radius_mm, other.radius_mm), (self.thickness_mm, other.thickness_mm),
             (self.index_after, other.index_after),
             (self.aperture_diameter_mm, other.aperture_diameter_mm),
-            (self.abbe_vd, other.abbe_vd)))
+            (self.abbe_vd, other.abbe_vd),
+            (_asphere_or_zeros(self), _asphere_or_zeros(other))))
 
     __hash__ = None
+
+
+def _asphere_or_zeros(lens: LensPrescription) -> np.ndarray:
+    """(n_surfaces, 9) asphere data, zeros for a spherical lens."""
+    if lens.asphere is None:
+        return np.zeros((lens.n_surfaces, _asph.N_ASPHERE))
+    return lens.asphere
 
 
 def _shape_rows(lens: LensPrescription, first: int) -> dict:
@@ -334,13 +351,42 @@ def parse_lens_text(text: str, source: str = "<string>") -> LensPrescription:
                             f"{index[-1]:g}; the film must be in air (index 0 or 1)")
 
     lens = LensPrescription(radius, thick, index, diam, abbe, source=source, lines=tuple(lines),
-                            file_format=file_format, comments=tuple(comments))
+                            file_format=file_format, comments=tuple(comments),
+                            asphere=_asphere_rows(text, lines, radius, index, source))
     lens = _gc.with_glass_rows(lens, glass_rows)
     lens = clip_to_physical_apertures(lens)
     ap = lens.is_aperture
     if ap.any():
         lens = lens.replace(max_stop_diameter_mm=float(np.max(lens.aperture_diameter_mm[ap])))
     return lens
+
+
+def _asphere_rows(text: str, lines: list, radius: np.ndarray, index: np.ndarray,
+                 source: str) -> np.ndarray | None:
+    """(n_rows, 9) asphere data of the rows' ``#!asphere`` comments (``lines``: each
+    row's line number; ``index`` with air as 1), None when there are none or all are
+    zero.  Errors name the line: a directive on a line without a row, a bad term, an
+    asphere on an aperture row (a plane in air, which would bend no light)."""
+    row_of_line = {ln: i for i, ln in enumerate(lines)}
+    out = np.zeros((len(lines), _asph.N_ASPHERE))
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        at = line.lower().find("#" + _asph.DIRECTIVE)
+        if at < 0:
+            continue
+        if lineno not in row_of_line:
+            raise LensFileError(source, lineno, "'#!asphere' stands on a line without a row",
+                                "put it at the end of the row it belongs to")
+        i = row_of_line[lineno]
+        try:
+            out[i] = _asph.parse_directive(line[at + 1:], "#!asphere: ")
+        except ValueError as e:
+            raise LensFileError(source, lineno, str(e)) from None
+        before = index[i - 1] if i > 0 else AIR
+        if radius[i] == 0.0 and before == AIR and index[i] == AIR and np.any(out[i] != 0.0):
+            raise LensFileError(source, lineno, f"row {i} is an aperture (radius 0, air on "
+                                f"both sides) with asphere terms, which would bend no light",
+                                "give the row the index of its glass, or remove its '#!asphere'")
+    return out if np.any(out != 0.0) else None
 
 
 def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
@@ -380,14 +426,10 @@ def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
     LensFileError
         When neighbouring faces cross at the axis ("physically impossible").
     """
-    a = lens.aperture_radius_mm.copy()
-    why: dict[int, str] = {}
-    radius, c = lens.radius_mm, lens.curvature_per_mm
-    for i in np.flatnonzero((radius != 0.0) & (a > np.abs(radius))):
-        a[i] = abs(radius[i])
-        why[i] = f"the sphere of radius {abs(radius[i]):g} mm ends"
+    a, why = _surface_ends(lens)
     for i in range(lens.n_surfaces - 1):
-        meet = _meeting_height_mm(c[i], c[i + 1], lens.thickness_mm[i], min(a[i], a[i + 1]))
+        meet = _meeting_height_mm(_asph.row_sag(lens, i), _asph.row_sag(lens, i + 1),
+                                  lens.thickness_mm[i], min(a[i], a[i + 1]))
         if meet is None:
             continue
         glass = lens.index_after[i] != AIR
@@ -423,17 +465,34 @@ def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
     return clipped
 
 
+def _surface_ends(lens: LensPrescription) -> tuple[np.ndarray, dict]:
+    """(n_surfaces,) semi-apertures (mm) clipped where each surface ends (a sphere at
+    |R|, an asphere at its conic's rim), and why, by row."""
+    a = lens.aperture_radius_mm.copy()
+    why: dict[int, str] = {}
+    radius = lens.radius_mm
+    aspheric = _asph.aspheric_rows(lens)
+    for i in np.flatnonzero((radius != 0.0) & ~aspheric & (a > np.abs(radius))):
+        a[i] = abs(radius[i])
+        why[i] = f"the sphere of radius {abs(radius[i]):g} mm ends"
+    for i in np.flatnonzero(aspheric):
+        rim = _asph.row_domain_radius_mm(lens, i)
+        if a[i] > rim:
+            a[i] = rim
+            why[i] = f"the asphere's conic (base radius {radius[i]:g} mm) ends"
+    return a, why
+
+
 #: Clipped rows a lens's warnings name one by one; the others are counted in one more.
 CLIP_WARNINGS_SHOWN = 5
 
 
-def _meeting_height_mm(c0: float, c1: float, thickness_mm: float,
-                       r_max_mm: float) -> float | None:
-    """Height (mm) in (0, r_max_mm) where a surface of curvature c1, ``thickness_mm``
-    behind one of curvature c0, meets it; None when they do not cross (or cross at
-    the axis, which no clipping mends)."""
+def _meeting_height_mm(sag0, sag1, thickness_mm: float, r_max_mm: float) -> float | None:
+    """Height (mm) in (0, r_max_mm) where a surface of sag function ``sag1`` (r -> mm),
+    ``thickness_mm`` behind one of sag ``sag0``, meets it; None when they do not cross
+    (or cross at the axis, which no clipping mends)."""
     def gap(r):
-        return thickness_mm + sag_mm(c1, r) - sag_mm(c0, r)
+        return thickness_mm + sag1(r) - sag0(r)
 
     r = np.linspace(0.0, r_max_mm, _CROSSING_GRID)
     g = gap(r)
@@ -454,11 +513,11 @@ def _meeting_height_mm(c0: float, c1: float, thickness_mm: float,
 
 def _check_surfaces_do_not_cross(lens: LensPrescription) -> None:
     """Neighbouring surfaces must not cross inside their common clear aperture."""
-    c = lens.curvature_per_mm
     for i in range(lens.n_surfaces - 1):
         rmax = min(lens.aperture_radius_mm[i], lens.aperture_radius_mm[i + 1])
         r = np.linspace(0.0, rmax, _CROSSING_GRID)
-        gap = lens.thickness_mm[i] + sag_mm(c[i + 1], r) - sag_mm(c[i], r)
+        gap = (lens.thickness_mm[i] + _asph.row_sag(lens, i + 1)(r)
+               - _asph.row_sag(lens, i)(r))
         k = int(np.argmin(gap))
         tol = CROSSING_TOLERANCE_MM
         if gap[k] < -tol:
@@ -477,13 +536,17 @@ def format_lens(lens: LensPrescription) -> str:
     if lens.file_format != "pbrt":
         out.append(f"# converted from {lens.file_format} format by povlens")
     with_abbe = bool(np.any(lens.abbe_vd != 0.0))
+    aspheric = _asph.aspheric_rows(lens)
     out.append("# radius\tthickness\tindex\taperture" + ("\tabbe_vd" if with_abbe else ""))
     for i in range(lens.n_surfaces):
         n = 0.0 if lens.is_aperture[i] else lens.index_after[i]
         cols = [lens.radius_mm[i], lens.thickness_mm[i], n, lens.aperture_diameter_mm[i]]
         if with_abbe:
             cols.append(lens.abbe_vd[i])
-        out.append("\t".join(f"{v:.17g}" for v in cols))
+        row = "\t".join(f"{v:.17g}" for v in cols)
+        if aspheric[i]:
+            row += "\t" + _asph.format_directive(lens.asphere[i])
+        out.append(row)
     _gc.add_glass_directives(out, lens)
     return "\n".join(out) + "\n"
 

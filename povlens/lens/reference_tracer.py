@@ -39,6 +39,19 @@ surfaces) Newton starts instead where the ray enters the clear-radius cylinder o
 the sigma side; see :func:`_intersect_from_outside_disc` for that case and for a
 clear radius equal to |R| (hemisphere), where the sag slope is infinite at the rim.
 
+*Even aspheres* (:mod:`povlens.lens.asphere`) are met without Newton's method, by
+bracketing and bisection: the ray is clipped to the part of it inside the cylinder
+r <= min(clear radius, conic rim) and between the sag's extreme values (sampled once
+per surface on 513 radii, widened by a margin), ``H(t) = sense (s(t) - z(r(t)))`` is
+sampled at ``_ASPHERE_SAMPLES`` points along it, and the first sign change is
+bisected to float resolution.  The wanted crossing is that first change if it goes
+from H <= 0 to H > 0 (crossed in the travel sense); a ray that is already past the
+surface where it enters the cylinder, first crosses it the other way, or never
+crosses it is blocked ("aperture" or "miss").  The sag here is summed term by term
+(not Horner) and its slope is the conic part's quotient-rule derivative
+``(2 c (1 + w) + (1 + k) c^3 r^2 / w) / (1 + w)^2``, w = sqrt(1 - (1 + k) c^2 r^2),
+equal to the fast tracer's ``c / w`` only algebraically.
+
 *Normal.*  From the sag derivative: ``N = (-k x, -k y, 1) / sqrt(1 + k^2 r^2)``,
 oriented along the travel sense.
 
@@ -102,6 +115,7 @@ _NEWTON_MAX_ITER = 60
 _NEWTON_RTOL = 1e-15
 _NEWTON_STALL_RTOL = 1e-10
 _RIM_RTOL = 1e-7
+_ASPHERE_SAMPLES = 64
 
 
 @dataclasses.dataclass(frozen=True)
@@ -169,6 +183,9 @@ class _Surface:
     n_scene_side: float      # refractive index on the scene side (before the row)
     n_film_side: float       # refractive index on the film side (after the row)
     shape: object = None     # ApertureShape of a shaped stop row, else None
+    asphere: tuple | None = None   # (k, a2, .., a16) of an aspheric row, else None
+    rho_mm: float = 0.0            # asphere: radius searched, min(clear, conic rim)
+    sag_range_mm: tuple = (0.0, 0.0)   # asphere: (min, max) sag over r <= rho, widened
 
 
 def _surfaces(lens: LensPrescription, film_distance_mm: float) -> list[_Surface]:
@@ -179,13 +196,53 @@ def _surfaces(lens: LensPrescription, film_distance_mm: float) -> list[_Surface]
     for i in range(lens.n_surfaces):
         radius = float(lens.radius_mm[i])
         n_after = float(lens.index_after[i])
-        out.append(_Surface(index=i, vertex_z_mm=float(zv[i]),
-                            c=0.0 if radius == 0.0 else 1.0 / radius,
-                            r_clear_mm=0.5 * float(lens.aperture_diameter_mm[i]),
-                            is_aperture=bool(ap[i]), n_scene_side=n_prev, n_film_side=n_after,
-                            shape=lens.aperture_shape if i == lens.aperture_shape_row else None))
+        srf = _Surface(index=i, vertex_z_mm=float(zv[i]), c=0.0 if radius == 0.0 else 1.0 / radius,
+                       r_clear_mm=0.5 * float(lens.aperture_diameter_mm[i]),
+                       is_aperture=bool(ap[i]), n_scene_side=n_prev, n_film_side=n_after,
+                       shape=lens.aperture_shape if i == lens.aperture_shape_row else None)
+        a = lens.asphere
+        if a is not None and any(float(v) != 0.0 for v in a[i]):
+            srf = _with_asphere(srf, tuple(float(v) for v in a[i]))
+        out.append(srf)
         n_prev = n_after
     return out
+
+
+def _with_asphere(srf: _Surface, coef: tuple) -> _Surface:
+    """``srf`` with its asphere data, search radius and widened sag range."""
+    c, k = srf.c, coef[0]
+    g = (1.0 + k) * c * c
+    rho = srf.r_clear_mm if g <= 0.0 else min(srf.r_clear_mm, (1.0 / g) ** 0.5)
+    sags = [_asphere_sag(c, coef, (rho * j / 512) ** 2) for j in range(513)]
+    lo, hi = min(sags), max(sags)
+    margin = 1e-3 * (1.0 + hi - lo)
+    return dataclasses.replace(srf, asphere=coef, rho_mm=rho,
+                               sag_range_mm=(lo - margin, hi + margin))
+
+
+def _asphere_sag(c: float, coef: tuple, r2: float) -> float:
+    """Even-asphere sag (mm) at squared radius r2, term by term; the conic root is
+    clamped at 0 beyond its rim."""
+    w = math.sqrt(max(1.0 - (1.0 + coef[0]) * c * c * r2, 0.0))
+    z, power = c * r2 / (1.0 + w), r2
+    for a in coef[1:]:
+        z += a * power
+        power *= r2
+    return z
+
+
+def _asphere_slope_over_r(c: float, coef: tuple, r2: float) -> float:
+    """(dz/dr) / r of the asphere (quotient rule on the conic part; module doc)."""
+    k = coef[0]
+    w = math.sqrt(max(1.0 - (1.0 + k) * c * c * r2, 0.0))
+    den = 1.0 + w
+    conic = ((2.0 * c * den + (1.0 + k) * c ** 3 * r2 / w) / (den * den) if w > 0.0
+             else math.copysign(math.inf, c) if c != 0.0 else 0.0)
+    poly, power = 0.0, 1.0
+    for i, a in enumerate(coef[1:], start=1):
+        poly += 2.0 * i * a * power
+        power *= r2
+    return conic + poly
 
 
 def _inside_shape(shape, x: float, y: float, radius: float) -> bool:
@@ -293,6 +350,8 @@ def _cylinder_crossing(x0: float, y0: float, dx: float, dy: float, radius: float
 def _intersect(srf: _Surface, x: float, y: float, s: float, dx: float, dy: float, ds: float,
                st: _RayState) -> tuple[float, float, float, float]:
     """Hit point (hx, hy, hs) on surface ``srf`` and the ray parameter t (mm)."""
+    if srf.asphere is not None:
+        return _intersect_asphere(srf, x, y, s, dx, dy, ds, st)
     c = srf.c
     t0 = -s / ds                       # vertex tangent plane s = 0
     x0, y0 = x + t0 * dx, y + t0 * dy
@@ -305,6 +364,69 @@ def _intersect(srf: _Surface, x: float, y: float, s: float, dx: float, dy: float
     hx, hy = x0 + u * dx, y0 + u * dy
     hs = _sag(c, hx * hx + hy * hy)
     return hx, hy, hs, t0 + u
+
+
+def _asphere_window(srf: _Surface, x: float, y: float, s: float, dx: float, dy: float,
+                    ds: float) -> tuple[float, float]:
+    """Ray parameters [t_a, t_b] inside the cylinder r <= rho and the sag range;
+    raises _Blocked("aperture") when empty."""
+    lo_s, hi_s = srf.sag_range_mm
+    ta, tb = sorted(((lo_s - s) / ds, (hi_s - s) / ds))
+    a2 = dx * dx + dy * dy
+    if a2 > 0.0:
+        b = x * dx + y * dy
+        disc = b * b - a2 * (x * x + y * y - srf.rho_mm * srf.rho_mm)
+        if disc < 0.0:
+            raise _Blocked("aperture")
+        sq = math.sqrt(disc)
+        ta, tb = max(ta, (-b - sq) / a2), min(tb, (-b + sq) / a2)
+    elif x * x + y * y > srf.rho_mm * srf.rho_mm:
+        raise _Blocked("aperture")
+    if not ta < tb:
+        raise _Blocked("aperture")
+    return ta, tb
+
+
+def _intersect_asphere(srf: _Surface, x: float, y: float, s: float, dx: float, dy: float,
+                       ds: float, st: _RayState) -> tuple[float, float, float, float]:
+    """Hit (hx, hy, hs) on an aspheric ``srf`` and the ray parameter t: the first sign
+    change of H along the ray's window, bisected (module doc)."""
+    c, coef = srf.c, srf.asphere
+    sense = 1.0 if ds > 0.0 else -1.0
+
+    def h(t: float) -> float:
+        px, py = x + t * dx, y + t * dy
+        return sense * (s + t * ds - _asphere_sag(c, coef, px * px + py * py))
+
+    ta, tb = _asphere_window(srf, x, y, s, dx, dy, ds)
+    n = _ASPHERE_SAMPLES
+    prev_t, prev_h = ta, h(ta)
+    if prev_h > 0.0:
+        raise _Blocked("aperture")       # past the surface where it enters the cylinder
+    for j in range(1, n + 1):
+        t = ta + (tb - ta) * j / n
+        ht = h(t)
+        if ht > 0.0:
+            break
+        prev_t, prev_h = t, ht
+    else:
+        raise _Blocked("miss")
+    lo, hi = prev_t, t                   # H(lo) <= 0 < H(hi)
+    while True:
+        mid = 0.5 * (lo + hi)
+        if not lo < mid < hi:
+            break
+        if h(mid) > 0.0:
+            hi = mid
+        else:
+            lo = mid
+    t = lo if h(lo) == 0.0 else 0.5 * (lo + hi)
+    hx, hy = x + t * dx, y + t * dy
+    r2 = hx * hx + hy * hy
+    fprime = ds - _asphere_slope_over_r(c, coef, r2) * (hx * dx + hy * dy)
+    if not math.isfinite(fprime) or abs(fprime) <= BORDERLINE_TOL:
+        st.flag("grazing")
+    return hx, hy, _asphere_sag(c, coef, r2), t
 
 
 def _intersect_from_outside_disc(srf: _Surface, x0: float, y0: float, dx: float, dy: float,
@@ -370,7 +492,13 @@ def _refract(srf: _Surface, hx: float, hy: float, dx: float, dy: float, ds: floa
     c = srf.c
     r2 = hx * hx + hy * hy
     q = 1.0 - c * c * r2
-    if q > 0.0:
+    if srf.asphere is not None:
+        k = _asphere_slope_over_r(c, srf.asphere, r2)       # sag'(r) / r
+        inv = 1.0 / math.sqrt(1.0 + k * k * r2)
+        if not math.isfinite(inv) or inv == 0.0:
+            raise _Blocked("miss")                          # at the conic's rim
+        nx, ny, ns = -k * hx * inv, -k * hy * inv, inv
+    elif q > 0.0:
         k = c / math.sqrt(q)                     # sag'(r) / r
         inv = 1.0 / math.sqrt(1.0 + k * k * r2)
         nx, ny, ns = -k * hx * inv, -k * hy * inv, inv   # unit normal, +s side

@@ -27,6 +27,18 @@ Refraction is the vector form of Snell's law (Heckbert's form, as in pbrt's
 
     d' = mu d + (sign(cos_i) sqrt(1 - mu^2 (1 - cos_i^2)) - mu cos_i) n.
 
+Even aspheres (:mod:`povlens.lens.asphere`)
+-------------------------------------------
+An aspheric row is met by Newton's method on ``F(t) = s(t) - z(r(t))`` (the ray's
+sag coordinate minus the surface's), ``F'(t) = d_s - (z'(r)/r) (x d_x + y d_y)``,
+all rays at once, started from the ray's crossing of the base conic
+``c (x^2 + y^2) + c (1 + k) s^2 - 2 s = 0`` (root chosen as for the sphere) or, where
+the ray misses the conic, from the vertex tangent plane.  At most
+``ASPHERE_MAX_ITER`` steps; a ray converges when its step is below
+``ASPHERE_RTOL (1 + |t|)`` mm.  The unit normal is ``(-k x, -k y, 1) / sqrt(1 + k^2 r^2)``
+with ``k = z'(r)/r``.  A ray that does not converge, lands beyond the conic's rim, or
+crosses the surface against the travel sense (``F'`` of the wrong sign) is blocked.
+
 Blocked rays
 ------------
 A ray is blocked at surface i when it misses the sphere (D < 0), meets it
@@ -46,6 +58,7 @@ import dataclasses
 import numpy as np
 
 from povlens.lens.aperture_shape import shape_margin_mm2
+from povlens.lens.asphere import aspheric_rows, domain_r2_mm2, sag_mm, slope_over_r
 from povlens.lens.coordinates import vertex_z_mm
 from povlens.lens.prescription import LensPrescription
 
@@ -54,6 +67,9 @@ __all__ = ["TraceResult", "UnclippedTrace", "trace_from_film", "trace_from_scene
 
 #: A ray that meets a surface more than this far *behind* itself is blocked.
 BACKWARD_TOLERANCE_MM = 1e-9
+#: Newton steps at most per aspheric surface, and the relative step of convergence.
+ASPHERE_MAX_ITER = 50
+ASPHERE_RTOL = 1e-12
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,11 +152,62 @@ def _intersect(c: float, vertex_z: float, x, y, z, dx, dy, dz, sense: float):
     return hx, hy, hs, bad
 
 
-def _refract(mu: float, c: float, hx, hy, hs, dx, dy, dz, sense: float):
-    """Directions after refraction at the hit points (index ratio ``mu`` = n1/n2),
-    and the rays totally reflected or turned back."""
+def _intersect_asphere(c: float, row: np.ndarray, vertex_z: float, x, y, z, dx, dy, dz,
+                       sense: float):
+    """Where rays meet an even asphere (base curvature ``c``, ``row`` = k, a2 .. a16):
+    the hit in local (x, y, s), the rays blocked, and the unit normal (module doc)."""
+    ps, ds = vertex_z - z, -dz
+    g = c * (1.0 + row[0])
+    a = c * (dx * dx + dy * dy) + g * ds * ds
+    B = c * (x * dx + y * dy) + g * ps * ds - ds
+    C = c * (x * x + y * y) + g * ps * ps - 2.0 * ps
+    D = B * B - a * C
+    sqrtD = np.sqrt(np.maximum(D, 0.0))
+    sigma = -np.sign(ds)
+    same = (np.sign(B) == sigma) | (B == 0.0)
+    t = np.where(same, -C / (B + sigma * sqrtD), (sigma * sqrtD - B) / np.where(a != 0, a, 1.0))
+    conic_ok = (D >= 0.0) & np.isfinite(t) & (1.0 - g * (ps + t * ds) > 0.0) & ((a != 0) | same)
+    t = np.where(conic_ok, t, -ps / ds)           # else: the vertex tangent plane
+    done = np.zeros(t.shape, dtype=bool)
+    for _ in range(ASPHERE_MAX_ITER):
+        hx, hy = x + t * dx, y + t * dy
+        r2 = hx * hx + hy * hy
+        f = ps + t * ds - sag_mm(c, row, r2)
+        fp = ds - slope_over_r(c, row, r2) * (hx * dx + hy * dy)
+        step = np.where(done, 0.0, f / fp)
+        t = t - step
+        done |= np.abs(step) <= ASPHERE_RTOL * (1.0 + np.abs(t))
+        if done.all():
+            break
+    hx, hy, hs = x + t * dx, y + t * dy, ps + t * ds
+    r2 = hx * hx + hy * hy
+    kappa = slope_over_r(c, row, r2)
+    fp = ds - kappa * (hx * dx + hy * dy)
+    inv = 1.0 / np.sqrt(1.0 + kappa * kappa * r2)
+    bad = (~done | ~np.isfinite(t) | (t < -BACKWARD_TOLERANCE_MM) | (np.sign(ds) != sense)
+           | (r2 >= domain_r2_mm2(c, row[0])) | (np.sign(fp) != sense) | ~np.isfinite(inv))
+    return hx, hy, hs, bad, (-kappa * hx * inv, -kappa * hy * inv, inv)
+
+
+def _hit(c: float, row, vertex_z: float, x, y, z, dx, dy, dz, sense: float):
+    """Hit point, blocked rays and unit normal at a sphere (``row`` None) or asphere."""
+    if row is not None:
+        return _intersect_asphere(c, row, vertex_z, x, y, z, dx, dy, dz, sense)
+    hx, hy, hs, bad = _intersect(c, vertex_z, x, y, z, dx, dy, dz, sense)
+    return hx, hy, hs, bad, (-c * hx, -c * hy, 1.0 - c * hs)
+
+
+def _asphere_row(lens: LensPrescription, i: int):
+    """Row ``i``'s asphere data, or None for a sphere."""
+    return lens.asphere[i] if aspheric_rows(lens)[i] else None
+
+
+def _refract(mu: float, normal, dx, dy, dz, sense: float):
+    """Directions after refraction at the hit points (index ratio ``mu`` = n1/n2, unit
+    ``normal`` (nx, ny, ns) in the local frame), and the rays totally reflected or
+    turned back."""
     ds = -dz
-    nx, ny, ns = -c * hx, -c * hy, 1.0 - c * hs
+    nx, ny, ns = normal
     cos_i = nx * dx + ny * dy + ns * ds
     k2 = 1.0 - mu * mu * (1.0 - cos_i * cos_i)
     g = np.sign(cos_i) * np.sqrt(np.maximum(k2, 0.0)) - mu * cos_i
@@ -197,15 +264,15 @@ def trace_unclipped_from_film(lens: LensPrescription, film_distance_mm: float, o
         x, y, z = o[:, 0].copy(), o[:, 1].copy(), o[:, 2].copy()
         dx, dy, dz = d[:, 0].copy(), d[:, 1].copy(), d[:, 2].copy()
         for i in range(S - 1, -1, -1):
-            c = curv[i]
-            hx, hy, hs, bad = _intersect(c, zv[i], x, y, z, dx, dy, dz, -1.0)
+            hx, hy, hs, bad, normal = _hit(curv[i], _asphere_row(lens, i), zv[i], x, y, z,
+                                           dx, dy, dz, -1.0)
             bad |= ~ok
             m = (r2max[i] - (hx * hx + hy * hy) if i != lens.aperture_shape_row
                  else shape_margin_mm2(lens, i, hx, hy))
             margin[:, i] = np.where(bad, -np.inf, m)
             if not lens.is_aperture[i]:
-                ex, ey, ez, tir = _refract(lens.index_after[i] / lens.index_before[i], c,
-                                           hx, hy, hs, dx, dy, dz, -1.0)
+                ex, ey, ez, tir = _refract(lens.index_after[i] / lens.index_before[i], normal,
+                                           dx, dy, dz, -1.0)
                 bad |= tir
                 dx, dy, dz = (np.where(bad, dx, ex), np.where(bad, dy, ey),
                               np.where(bad, dz, ez))
@@ -255,15 +322,15 @@ def _trace(lens: LensPrescription, film_distance_mm: float, o: np.ndarray, d: np
         for i in order:
             if idx.size == 0:
                 break
-            c = curv[i]
-            hx, hy, hs, bad = _intersect(c, zv[i], x, y, z, dx, dy, dz, sense)
+            hx, hy, hs, bad, normal = _hit(curv[i], _asphere_row(lens, i), zv[i], x, y, z,
+                                           dx, dy, dz, sense)
             if i == lens.aperture_shape_row:    # a shaped stop (iris, mask): its margin
                 bad |= ~(shape_margin_mm2(lens, i, hx, hy) >= 0.0)
             else:
                 bad |= hx * hx + hy * hy > r2max[i]
             if not aperture[i]:
                 n1, n2 = (n_before[i], n_after[i]) if toward_film else (n_after[i], n_before[i])
-                dx, dy, dz, tir = _refract(n1 / n2, c, hx, hy, hs, dx, dy, dz, sense)
+                dx, dy, dz, tir = _refract(n1 / n2, normal, dx, dy, dz, sense)
                 bad |= tir
             x, y, z = hx, hy, zv[i] - hs
             if bad.any():

@@ -40,7 +40,8 @@ import time
 import numpy as np
 
 from povlens.errors import UsageError
-from povlens.lens.prescription import LensPrescription, sag_mm
+from povlens.lens.asphere import sag_range_mm
+from povlens.lens.prescription import LensPrescription
 from povlens.pupil.sampler_interface import (LensSample, SamplerMeasurements,
                                              check_sample_arguments, finish_sample,
                                              polar_film_coordinates)
@@ -271,9 +272,9 @@ class NaiveRearElement(SamplerMeasurements):
         t0 = time.perf_counter()
         F = float(film_distance_mm)
         R = float(lens.aperture_radius_mm[-1])
-        s = float(sag_mm(lens.curvature_per_mm[-1], np.array(R)))
+        s_lo, s_hi = sag_range_mm(lens, lens.n_surfaces - 1, R)    # sphere or asphere
         radius = R
-        for qz in (F, F - s):  # the rear surface spans z in [F - s, F] over its aperture
+        for qz in (F - s_lo, F - s_hi):  # the z span of the rear surface over its aperture
             if qz > 0:
                 lam = F / qz
                 radius = max(radius, film_half_diagonal_mm * abs(1.0 - lam) + lam * R)

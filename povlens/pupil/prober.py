@@ -17,7 +17,8 @@ import math
 import numpy as np
 
 from povlens.lens.chief_ray import chief_ray_aim_mm
-from povlens.lens.prescription import LensPrescription, sag_mm
+from povlens.lens.asphere import sag_range_mm
+from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_film
 
 __all__ = ["PupilProber", "grow_boxes", "RADIAL_SAMPLES", "BISECTION_RELATIVE",
@@ -45,9 +46,8 @@ class PupilProber:
         self.rays = 0
         self.non_star_radii: set[float] = set()
         rr = float(lens.aperture_radius_mm[-1])
-        s = float(sag_mm(lens.curvature_per_mm[-1], np.array(rr)))
-        z_a, z_b = self.film_distance_mm, self.film_distance_mm - s
-        self.z_range = (min(z_a, z_b), max(z_a, z_b))
+        s_lo, s_hi = sag_range_mm(lens, lens.n_surfaces - 1, rr)   # sphere or asphere
+        self.z_range = (self.film_distance_mm - s_hi, self.film_distance_mm - s_lo)
         self.rear_radius = rr
 
     def domain(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

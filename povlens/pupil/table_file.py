@@ -51,6 +51,8 @@ def write_table_file(path, arrays: dict, lens: LensPrescription, metadata: dict)
     path = Path(path)
     meta = json.dumps(metadata, allow_nan=False, default=_json_default)
     buf = io.BytesIO()
+    if lens.asphere is not None:                       # even aspheres (lens/asphere.py)
+        arrays = {**arrays, "lens_asphere": lens.asphere}
     np.savez(buf, **arrays,
              lens_radius_mm=lens.radius_mm, lens_thickness_mm=lens.thickness_mm,
              lens_index_after=lens.index_after,
@@ -107,7 +109,8 @@ def read_table_file(path, make):
         lens = LensPrescription(arrays["lens_radius_mm"], arrays["lens_thickness_mm"],
                                 arrays["lens_index_after"],
                                 arrays["lens_aperture_diameter_mm"], arrays["lens_abbe_vd"],
-                                source=meta["lens"]["source"])
+                                source=meta["lens"]["source"],
+                                asphere=arrays.get("lens_asphere"))
         if lens.sha256() != meta["lens"]["sha256"]:
             raise ValueError("the stored lens does not match its hash")
         return make(

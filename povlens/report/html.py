@@ -39,7 +39,8 @@ import numpy as np
 from povlens.errors import PovlensError
 from povlens.lens.coordinates import vertex_z_mm
 from povlens.lens.paraxial import paraxial_data
-from povlens.lens.prescription import LensPrescription, sag_mm
+from povlens.lens.asphere import row_sag
+from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_film
 from povlens.plan.depth_probe import axial_depth, probe_depth
 from povlens.plan.render_folder import RenderFolder
@@ -196,13 +197,12 @@ def lens_figure(lens: LensPrescription, film_distance_mm: float, film_half_diago
     from matplotlib.patches import Polygon
     fd = float(film_distance_mm)
     zv = vertex_z_mm(lens.thickness_mm, fd)
-    c = lens.curvature_per_mm
     a = lens.aperture_radius_mm
     glass = lens.index_after != 1.0
     fig, ax = plt.subplots(figsize=(9.0, 4.6))
 
     def profile(i, r):
-        return zv[i] - sag_mm(c[i], r)
+        return zv[i] - row_sag(lens, i)(r)          # sphere or even asphere
 
     for i in range(lens.n_surfaces - 1):                   # glass between rows i and i+1
         if glass[i]:

@@ -138,7 +138,7 @@ def one_entry(tmp_path, **changes):
 
 @pytest.mark.parametrize("changes,match", [
     ({"r0__lens_geometry": "cyl-y"}, r"row 0: lens-geometry 'cyl-y'"),
-    ({"r4__aspherical_equation": [0.0, 1e-6, 0.0, 0.0]}, r"row 4: aspherical-equation"),
+    ({"r4__aspherical_equation": "1e-6"}, r"row 4: aspherical-equation \"1e-6\" is not a list"),
     ({"r2__thickness": [23.3, 20.0, 18.0]}, r"row 2: thickness is a list \(a zoom lens"),
     ({"r1__ior": "glass"}, r"row 1: ior is \"glass\", not a number"),
     ({"r5__thickness": -1.0}, r"row 5: thickness -1 mm is negative"),

@@ -115,8 +115,6 @@ def test_glasses_without_index_are_refused_and_can_be_given():
 
 
 @pytest.mark.parametrize("name,match", [
-    ("US08427765-1.ZMX", r"US08427765-1.ZMX:97: surface 4 \(line 97\): an even asphere with "
-                         r"non-zero aspheric terms \(PARM 2 = 1.10721e-05"),
     ("HoO-V2C18Ex03.zmx", r"HoO-V2C18Ex03.zmx:78: surface 2 \(line 78\): a mirror"),
 ])
 def test_public_samples_a_kolb_file_cannot_hold_are_refused(name, match):
@@ -139,7 +137,7 @@ def edited(tmp_path, old, new, name="edited.zmx"):
     ("TYPE STANDARD\n  FIMP \n  CURV 0.0501", "TYPE TOROIDAL\n  FIMP \n  CURV 0.0501",
      r"surface 1 \(line \d+\): surface type TOROIDAL"),
     ("SURF 2\n  TYPE STANDARD", "SURF 2\n  TYPE COORDBRK", r"surface 2 .*coordinate break"),
-    ("  DISZ 7\n", "  DISZ 7\n  CONI -1\n", r"surface 1 .*conic constant -1"),
+    ("  DISZ 7\n", "  DISZ 7\n  CONI -1\n", r"surface 1 .*the stop lies on an aspheric face"),
     ("  DISZ 7\n", "  DISZ 7\n  SCBD 1 0 0 0 0.5 0 0 0\n", r"surface 1 .*tilted or decentered"),
     ("MODE SEQ", "MODE NSC", r":2: MODE NSC: not a sequential design"),
     ("UNIT MM", "UNIT FURLONG", r":6: UNIT FURLONG: unknown lens unit"),
