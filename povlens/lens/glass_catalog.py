@@ -20,7 +20,6 @@ also a little outside the range the maker fitted (some end at 400 or 700 nm).
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import functools
 import importlib.util
 import math
@@ -183,6 +182,7 @@ def find_glass(name: str) -> Glass:
 
 def _closest_hint(key: str, makers: tuple[str, ...]) -> str:
     """'closest known names: ...' for an unknown name (``key`` as :func:`_key` makes it)."""
+    import difflib     # only for an unknown name
     by_key: dict[str, list[str]] = {}
     for maker, stem in _names().values():
         if maker in makers:

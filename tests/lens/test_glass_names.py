@@ -182,3 +182,18 @@ def test_written_lentil_file_reads_back_its_glasses(tmp_path):
     n_c = lens_at_wavelength(again, LINE_C_NM).index_after
     sf5 = again.glass.index("SCHOTT:SF5")
     assert n_f[sf5] - n_c[sf5] == pytest.approx(0.6727 / 32.21, rel=3e-4)   # SF5's sheet
+
+
+def test_zemax_stated_values_of_another_glass_keep_cauchy_with_a_warning(tmp_path):
+    p = tmp_path / "sf5.zmx"
+    p.write_text(ZMX.format(glass="N-BK7").replace("1.5 40", "1.6727 32.21"))
+    with pytest.warns(Warning, match=r"glass N-BK7: the file states n_d 1.6727 \(catalogue "
+                                     r"1.51680\).*not catalogue glass SCHOTT:N-BK7"):
+        lens = import_zmx(p).lens
+    row = int(np.flatnonzero(lens.index_after != 1.0)[0])
+    assert lens.index_after[row] == 1.6727 and lens.glass == ()
+    # stated values of the named glass (N-SF11 in the public singlet sample): kept
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        singlet = import_zmx(ROOT / "tests" / "data" / "zmx" / "singlet-pcx-25mm.zmx").lens
+    assert "SCHOTT:N-SF11" in singlet.glass
