@@ -395,9 +395,11 @@ class RenderFolder:
 
     def worker_inputs(self) -> list[Path]:
         """The folder's files a lens sample's POV-Ray run reads: the plan, the pupil
-        table and the wrappers (the views' and the batches')."""
+        table, the wrappers (the views' and the batches') and the radiosity samples
+        when there are."""
+        cache = [self.radiosity_cache] if self.radiosity_cache.is_file() else []
         return ([self.plan_json, self.pupil_npz] + sorted(self.path.glob("*.pov"))
-                + sorted(self.samples.glob("*.pov")))
+                + sorted(self.samples.glob("*.pov")) + cache)
 
     # -- names for the templates ---------------------------------------------------------
 

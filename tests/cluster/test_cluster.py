@@ -472,3 +472,25 @@ def test_a_scene_under_an_odd_path_renders_on_the_workers_as_here(cluster, tmp_p
     a, b = read_image(local.image_exr), read_image(remote.image_exr)
     assert a[..., 0].max() > 0.5 and a[..., 2].max() > 0.5     # the map's two colours
     assert np.array_equal(a, b)
+
+
+def test_the_shared_radiosity_travels_with_the_bundle(cluster, tmp_path):
+    """A radiosity scene (issue 25): the client computes the pretrace's radiosity samples
+    once and they travel with the bundle, so no worker redoes them; the image is the
+    local render's within radiosity's noise (the two pretraces ran separately)."""
+    import io
+    import tarfile
+    from tests.rendering.test_radiosity_cache import RADIOSITY_SCENE
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    opts = dict(lens="dgauss.50mm", method="mesh", samples=4, width=48, height=36)
+    local = povlens.render(scene, outdir=tmp_path / "here", **opts)
+    remote = povlens.render(scene, outdir=tmp_path / "there", scheduler=cluster.address,
+                            group_size=2, **opts)
+    out = tmp_path / "there"
+    assert (out / "radiosity.rca").stat().st_size > 0
+    _, data = make_bundle(out, read_plan(out))
+    with tarfile.open(fileobj=io.BytesIO(data)) as tar:
+        assert any(n.endswith("/radiosity.rca") for n in tar.getnames())
+    a, b = read_image(local.image_exr)[..., :3], read_image(remote.image_exr)[..., :3]
+    assert abs(b.mean() / a.mean() - 1.0) < 0.03
