@@ -60,7 +60,9 @@ def test_list_table_and_json(capsys):
     ([SUBSET, "--id", "0042"], ["--id '0042'", "has no entry '0042'", "--list"]),
     ([SUBSET], ["--id is needed", "holds 8 lenses", "--list"]),
     ([SUBSET, "--id", "0002", "--adjusted"], ["--adjusted: entry 0002", "leave out --adjusted"]),
-    ([ZMX / "US08427765-1.ZMX"], ["US08427765-1.ZMX:97: surface 4", "even asphere", "hint:"]),
+    # its aspheres are read; its mould glass is in no catalogue (the closest are named)
+    ([ZMX / "US08427765-1.ZMX"], ["US08427765-1.ZMX:93: surface 3", "L-TIM28_MOLD",
+                                  "L-TIM28 (OHARA)", "--glass"]),
     ([ZMX / "HoO-V2C18Ex03.zmx"], ["HoO-V2C18Ex03.zmx:78: surface 2", "a mirror"]),
     ([ZMX / "US05831776-1.zmx"], ["glass SILICA has no refractive index", "--glass"]),
     (["{tmp}/nostop.zmx"], ["nostop.zmx: no surface is marked STOP", "mark the aperture stop"]),
