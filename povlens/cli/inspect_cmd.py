@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from povlens.lens.asphere import TERM_NAMES, aspheric_rows
 from povlens.lens.paraxial import paraxial_data
 from povlens.cli.common import add_lens_command, load_lens, print_json
 
@@ -19,13 +20,16 @@ def register(sub) -> None:
 def inspect_dict(lens) -> dict:
     p = paraxial_data(lens)
     d = {"lens": lens.source, "format": lens.file_format, "surfaces": lens.n_surfaces}
+    aspheric = aspheric_rows(lens)
     d.update(p.to_dict())
     d["surface_rows"] = [
         {"radius": float(lens.radius_mm[i]), "thickness": float(lens.thickness_mm[i]),
          "index": float(lens.index_after[i]), "aperture": float(lens.aperture_diameter_mm[i]),
          "abbe_vd": float(lens.abbe_vd[i]),
-         "kind": ("aperture" if lens.is_aperture[i] else
-                  "flat" if lens.radius_mm[i] == 0 else "sphere")}
+         "kind": ("aperture" if lens.is_aperture[i] else "asphere" if aspheric[i] else
+                  "flat" if lens.radius_mm[i] == 0 else "sphere"),
+         **({"asphere": dict(zip(TERM_NAMES, map(float, lens.asphere[i])))} if aspheric[i]
+            else {})}
         for i in range(lens.n_surfaces)]
     d["notes"] = notes(lens, p)
     return d

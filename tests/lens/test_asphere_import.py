@@ -131,3 +131,12 @@ def test_render_through_an_aspheric_lens(tmp_path):
     img = read_image(out / "image.exr")
     assert img.shape[:2] == (36, 48) and np.all(np.isfinite(img)) and img.max() > 0
     assert math.isfinite(float(img.mean()))
+
+
+def test_inspect_names_the_aspheric_rows(tmp_path):
+    from povlens.cli.inspect_cmd import inspect_dict
+    p = tmp_path / "asph.dat"
+    p.write_text(ASPHERIC_DGAUSS)
+    rows = inspect_dict(_quiet(read_lens, p))["surface_rows"]
+    assert [r["kind"] for r in rows].count("asphere") == 1
+    assert rows[-1]["asphere"]["k"] == -2 and rows[-1]["asphere"]["a6"] == -2e-9
