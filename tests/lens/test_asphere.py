@@ -229,3 +229,12 @@ def test_an_asphere_beyond_its_conic_is_clipped_where_it_ends():
 def test_bundled_lenses_unchanged():
     lens = read_lens("dgauss.50mm")
     assert lens.asphere is None
+
+
+def test_asphere_and_glass_comments_share_a_row():
+    for row in ("20 6 1.5168 16 64.17 #!asphere k=-1 a4=-4e-5 #!glass N-BK7",
+                "20 6 1.5168 16 64.17 #!glass N-BK7 #!asphere k=-1 a4=-4e-5"):
+        lens = _lens(row + "\n-60 40 1 16\n")
+        assert lens.asphere[0, :3].tolist() == [-1, 0, -4e-5] and lens.glass[0].endswith("N-BK7")
+        back = _lens(format_lens(lens))
+        assert back == lens and back.glass == lens.glass
