@@ -131,6 +131,7 @@ def main(argv=None) -> int:
                     row["own_camera_s"] = round(own, 2)
                     rows.append(row)
                     print(row, flush=True)
+                    _write(rows, args.out)      # after each row: a long sweep may be cut
     _write(rows, args.out)
     return 0
 
