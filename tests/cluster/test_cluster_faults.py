@@ -31,7 +31,8 @@ from povlens.plan.schema import read_plan                         # noqa: E402
 from povlens.util.images import read_image, write_png_srgb        # noqa: E402
 
 from conftest import ROOT                                         # noqa: E402
-from test_cluster import START_TIMEOUT_S, Cluster, _close, _free_port  # noqa: E402
+from test_cluster import (START_TIMEOUT_S, Cluster, _close, _free_port,  # noqa: E402
+                          render_here_and_there, two_workers)
 
 SCENE = ROOT / "scenes" / "paper.pov"
 SMALL = ["--lens", "dgauss.50mm", "--method", "mesh", "--width", "32", "--height", "24"]
@@ -39,14 +40,8 @@ SMALL = ["--lens", "dgauss.50mm", "--method", "mesh", "--width", "32", "--height
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
-    c = Cluster(tmp_path_factory.mktemp("faults"))
-    try:
-        c.add_worker()
-        c.add_worker()
-        c.wait_for_workers(2)
+    with two_workers(tmp_path_factory.mktemp("faults")) as c:
         yield c
-    finally:
-        c.stop()
 
 
 def _povlens(*args: str, env: dict | None = None, timeout_s: float = 120):
@@ -129,10 +124,7 @@ def _checker_scene(folder: Path, elsewhere: Path) -> Path:
 def test_links_in_the_scene_folder_arrive_as_the_files_they_lead_to(cluster, tmp_path):
     scene = _checker_scene(tmp_path / "scene", tmp_path / "elsewhere")
     opts = dict(lens="dgauss.50mm", focus=6, method="mesh", samples=2, width=48, height=36)
-    local = povlens.render(scene, outdir=tmp_path / "local", **opts)
-    dist = povlens.render(scene, outdir=tmp_path / "dist", scheduler=cluster.address,
-                          group_size=1, **opts)
-    a, b = read_image(local.image_exr), read_image(dist.image_exr)
+    a, b = render_here_and_there(scene, cluster, tmp_path / "local", tmp_path / "dist", **opts)
     assert b[..., 0].max() > 0.5 and b[..., 2].max() > 0.5      # the map's two colours
     assert np.array_equal(a, b)                                 # group size 1: bit for bit
     key, data = make_bundle(tmp_path / "dist", read_plan(tmp_path / "dist"))
