@@ -176,6 +176,15 @@ def find_glass(name: str) -> Glass:
         for label, found in names.items():
             if found[0] == m and _key(found[1]) == key:
                 return _load(*found)
+    moulded = re.fullmatch(r"(.+?)[-_ ]?MOLD", text, flags=re.IGNORECASE)
+    if moulded:
+        base = find_glass(f"{maker}:{moulded.group(1)}" if sep else moulded.group(1))
+        warnings.warn(GlassWarning(
+            f"glass '{name}' is {base.label} after precision moulding (Zemax's _MOLD "
+            f"names), which no catalogue povlens has lists; moulding changes the index by a "
+            f"few 0.001 at most: povlens uses {base.label}'s formula (give "
+            f"the moulded nd and vd if you know them)"), stacklevel=2)
+        return base
     raise UnknownGlassError(f"glass '{name}' is in none of the catalogues "
                             f"({', '.join(makers)})", _closest_hint(key, makers))
 
