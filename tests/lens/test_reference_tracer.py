@@ -31,6 +31,10 @@ FILM_AT_INFINITY_MM = {
     "singlet.pcx.25mm.dat": 21.4757,
     "cooke.triplet.50mm.dat": 42.4363,
     "tessar.50mm.dat": 42.7235,
+    # paraxial back focal distances by the independent y-nu trace of the file's numbers
+    # (tests/lens/import_reference.trace)
+    "angenieux.100mm.dat": 55.9771,
+    "aspheric.31mm.dat": 21.4472,
     "dgauss.dat": 36.1059 * 2.0,
     "wide.dat": 14.3182 * 100.0 / 22.0,
 }

@@ -22,6 +22,8 @@ FILM_MM = {
     "telephoto.250mm.dat": 105.0705, "singlet.pcx.25mm.dat": 21.4757,
     "cooke.triplet.50mm.dat": 42.4363, "tessar.50mm.dat": 42.7235,
     "dgauss.dat": 2.0 * 36.1059, "wide.dat": 14.3182 * 100.0 / 22.0,
+    # paraxial back focal distances, y-nu trace (tests/lens/import_reference.trace)
+    "angenieux.100mm.dat": 55.9771, "aspheric.31mm.dat": 21.4472,
 }
 
 
