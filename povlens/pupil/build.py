@@ -99,7 +99,8 @@ from povlens.pupil.prober import PupilProber, grow_boxes
 from povlens.pupil.table import PupilTable
 
 __all__ = ["build_pupil_table", "sampling_plane_z_mm", "PLANES", "DEFAULT_TOLERANCE", "SAFETY_MARGIN",
-           "RENORMALISE", "MAX_KNOTS", "MIN_STOP_FRACTION"]
+           "RENORMALISE", "MAX_KNOTS", "MIN_STOP_FRACTION", "check_build_arguments",
+           "check_stop_is_resolvable"]
 
 #: Default relative area tolerance of the region description (module docstring).
 DEFAULT_TOLERANCE = 0.005
@@ -182,13 +183,13 @@ def build_pupil_table(lens: LensPrescription, film_distance_mm: float,
         through the lens.
     """
     t_start = time.perf_counter()
-    _check_build_arguments(film_distance_mm, film_half_diagonal_mm, tolerance, n_angles)
+    check_build_arguments(film_distance_mm, film_half_diagonal_mm, tolerance, n_angles)
     # A shaped stop (iris, mask) breaks the rotational symmetry the table relies on; it
     # only removes rays, so the round stop's regions contain its (conservative), and the
     # field sampler tightens to the shape (povlens.pupil.aperture_domain).
     lens = lens.replace(aperture_shape=None, aperture_shape_row=-1)
     hd = float(film_half_diagonal_mm)
-    _check_stop_is_resolvable(lens)
+    check_stop_is_resolvable(lens)
     zp, plane_used = sampling_plane_z_mm(lens, float(film_distance_mm), plane)
     prober = PupilProber(lens, film_distance_mm, zp)
     tracer = _KnotTracer(prober, progress)
@@ -219,7 +220,7 @@ def build_pupil_table(lens: LensPrescription, film_distance_mm: float,
 
 # ----- phase 0: arguments ---------------------------------------------------------------
 
-def _check_build_arguments(film_distance_mm, film_half_diagonal_mm, tolerance,
+def check_build_arguments(film_distance_mm, film_half_diagonal_mm, tolerance,
                            n_angles) -> None:
     """Raise UsageError for a non-positive length, a tolerance outside (0, 1) or a bad M."""
     for name, v in (("film_distance_mm", film_distance_mm),
@@ -235,7 +236,7 @@ def _check_build_arguments(film_distance_mm, film_half_diagonal_mm, tolerance,
                              f"n_angles={n_angles!r}: must be between 2 and 4096")
 
 
-def _check_stop_is_resolvable(lens: LensPrescription) -> None:
+def check_stop_is_resolvable(lens: LensPrescription) -> None:
     """Refuse a stop so small that its pupil cannot be resolved in float64."""
     pdat = paraxial_data(lens)
     if pdat.stop_diameter < MIN_STOP_FRACTION * abs(pdat.efl):

@@ -49,7 +49,8 @@ from povlens.util.user_cache import cached_array
 
 __all__ = ["sobol_points", "halton_points", "stratified_points", "lens_points",
            "cranley_patterson", "POINT_SETS", "PassFraction", "pass_fraction",
-           "irradiance_factor", "exposure_normalisation"]
+           "irradiance_factor", "exposure_normalisation", "irradiance_factor_at",
+           "pass_fraction_at"]
 
 
 def _check_n(n: int) -> int:
@@ -222,6 +223,54 @@ def irradiance_factor(sampler, lens: LensPrescription, film_distance_mm: float, 
         w = np.where(passed, s.weight, 0.0).reshape(len(idx), n_samples)
         out[idx] = w.mean(axis=1)
     return out
+
+
+def _trace_at(sampler, lens, film_distance_mm, film_xy, n_samples, seed, chunk):
+    """Yield (point indices, LensSample, passed) for ``n_samples`` Sobol' points at each
+    film point of ``film_xy`` (m, 2), a few points per call."""
+    pts = np.asarray(film_xy, dtype=np.float64).reshape(-1, 2)
+    u = sobol_points(n_samples, 2, seed=seed)
+    per = max(1, chunk // max(n_samples, 1))
+    for start in range(0, len(pts), per):
+        idx = np.arange(start, min(start + per, len(pts)))
+        film = np.repeat(pts[idx], n_samples, axis=0)
+        s = sampler.sample(film, np.tile(u, (len(idx), 1)))
+        passed = np.zeros(len(film), bool)
+        v = np.nonzero(s.valid)[0]
+        if v.size:
+            passed[v] = trace_from_film(lens, film_distance_mm, s.film_point[v],
+                                        s.direction[v]).passed
+        yield idx, s, passed
+
+
+def irradiance_factor_at(sampler, lens: LensPrescription, film_distance_mm: float, film_xy,
+                         *, n_samples: int = 4096, seed: int = 0, chunk: int = 1 << 17
+                         ) -> np.ndarray:
+    """Estimated E/L at film points ``film_xy`` (m, 2) mm, (m,): as
+    :func:`irradiance_factor`, at points given by both coordinates (for lenses whose
+    illumination depends on more than the film radius)."""
+    pts = np.asarray(film_xy, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(len(pts))
+    for idx, s, passed in _trace_at(sampler, lens, film_distance_mm, pts, n_samples, seed,
+                                    chunk):
+        out[idx] = np.where(passed, s.weight, 0.0).reshape(len(idx), n_samples).mean(axis=1)
+    return out
+
+
+def pass_fraction_at(sampler, lens: LensPrescription, film_distance_mm: float, film_xy,
+                     *, n_samples: int = 1024, seed: int = 0, chunk: int = 1 << 17
+                     ) -> PassFraction:
+    """:func:`pass_fraction` at film points ``film_xy`` (m, 2) mm; its ``film_radius_mm``
+    holds their radii."""
+    pts = np.asarray(film_xy, dtype=np.float64).reshape(-1, 2)
+    frac, nv = np.zeros(len(pts)), np.zeros(len(pts), dtype=np.int64)
+    for idx, s, passed in _trace_at(sampler, lens, film_distance_mm, pts, n_samples, seed,
+                                    chunk):
+        valid = np.asarray(s.valid, bool).reshape(len(idx), n_samples)
+        nv[idx] = valid.sum(axis=1)
+        ps = passed.reshape(len(idx), n_samples).sum(axis=1)
+        frac[idx] = np.where(nv[idx] > 0, ps / np.maximum(nv[idx], 1), 0.0)
+    return PassFraction(np.hypot(pts[:, 0], pts[:, 1]), frac, nv, int(n_samples))
 
 
 def exposure_normalisation(sampler, lens: LensPrescription, film_distance_mm: float, *,

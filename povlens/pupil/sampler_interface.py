@@ -15,7 +15,8 @@ import dataclasses
 import numpy as np
 
 from povlens.lens.prescription import LensPrescription
-from povlens.pupil.monte_carlo import PassFraction, irradiance_factor, pass_fraction
+from povlens.pupil.monte_carlo import (PassFraction, irradiance_factor, irradiance_factor_at,
+                                      pass_fraction, pass_fraction_at)
 
 __all__ = ["LensSample", "finish_sample", "check_sample_arguments", "polar_film_coordinates",
            "SamplerMeasurements"]
@@ -163,3 +164,17 @@ class SamplerMeasurements:
             cache[key] = irradiance_factor(self, self.lens, self.film_distance_mm, radii,
                                            n_samples=n_samples, seed=seed)
         return cache[key].copy()
+
+    def irradiance_factor_at(self, film_xy, *, n_samples: int = 4096,
+                             seed: int = 0) -> np.ndarray:
+        """Estimated E/L at film points (m, 2) mm
+        (:func:`povlens.pupil.monte_carlo.irradiance_factor_at`)."""
+        return irradiance_factor_at(self, self.lens, self.film_distance_mm, film_xy,
+                                    n_samples=n_samples, seed=seed)
+
+    def pass_fraction_at(self, film_xy, *, n_samples: int = 1024,
+                         seed: int = 0) -> PassFraction:
+        """:class:`~povlens.pupil.monte_carlo.PassFraction` of this sampler at film
+        points (m, 2) mm."""
+        return pass_fraction_at(self, self.lens, self.film_distance_mm, film_xy,
+                                n_samples=n_samples, seed=seed)
