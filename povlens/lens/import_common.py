@@ -16,13 +16,15 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from povlens.errors import LensFileError, OpticsError, ParameterError, PovlensWarning
 from povlens.lens.asphere import N_ASPHERE, scaled_asphere
-from povlens.lens.paraxial import paraxial_data
+from povlens.lens import toric
+from povlens.lens.paraxial import anamorphic_data, paraxial_data, primary_meridian
 from povlens.lens.prescription import (AIR, MAX_INDEX, MAX_LENGTH_MM, MIN_LENGTH_MM,
                                        LensPrescription, clip_to_physical_apertures,
                                        format_lens, read_lens)
@@ -54,7 +56,10 @@ class SourceRow:
     line : the row's line in the source file, if known (for error messages).
     glass : the catalogue glass after the surface (``SCHOTT:N-BK7``), or "" (none).
     asphere : None for a sphere, else 9 floats: conic k, a2 .. a16
-        (:mod:`povlens.lens.asphere`).
+        (:mod:`povlens.lens.asphere`; on a toric row its y-z profile's).
+    radius_x_mm : None for a rotationally symmetric row, else the radius (mm, 0 = flat
+        in x) of its x-z section; ``radius_mm`` is then its y-z section
+        (:mod:`povlens.lens.toric`).
     """
 
     radius_mm: float
@@ -67,6 +72,7 @@ class SourceRow:
     line: int | None = None
     asphere: tuple | None = None
     glass: str = ""
+    radius_x_mm: float | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -101,7 +107,7 @@ class ImportedLens:
         if not (isinstance(efl_mm, (int, float)) and efl_mm > 0 and math.isfinite(efl_mm)):
             raise ParameterError("efl_mm", efl_mm,
                                  f"efl_mm={efl_mm}: must be a positive number of mm")
-        efl = paraxial_data(self.lens).efl
+        efl = paraxial_data(self.lens, primary_meridian(self.lens)).efl
         if efl <= 0:
             raise ParameterError("efl_mm", efl_mm,
                                  f"efl_mm={efl_mm:g}: {self.lens.source} has a negative focal "
@@ -112,6 +118,7 @@ class ImportedLens:
             radius_mm=lens.radius_mm * k, thickness_mm=lens.thickness_mm * k,
             aperture_diameter_mm=lens.aperture_diameter_mm * k,
             asphere=scaled_asphere(lens.asphere, k),
+            radius_x_mm=None if lens.radius_x_mm is None else lens.radius_x_mm * k,
             max_stop_diameter_mm=(None if lens.max_stop_diameter_mm is None
                                   else lens.max_stop_diameter_mm * k),
             comments=lens.comments + (f"scaled x{k:.9g} from EFL {efl:.9g} mm to "
@@ -161,6 +168,12 @@ def _check_row(row: SourceRow, last: bool, where: str) -> None:
         if v != 0 and not MIN_LENGTH_MM <= abs(v) <= MAX_LENGTH_MM:
             fail(f"{name} {v:g} mm is outside the supported range {MIN_LENGTH_MM:g} .. "
                  f"{MAX_LENGTH_MM:g} mm")
+    if row.radius_x_mm is not None:
+        if not math.isfinite(row.radius_x_mm):
+            fail(f"x-z radius {row.radius_x_mm} is not a finite number")
+        if row.radius_x_mm != 0 and not MIN_LENGTH_MM <= abs(row.radius_x_mm) <= MAX_LENGTH_MM:
+            fail(f"x-z radius {row.radius_x_mm:g} mm is outside the supported range "
+                 f"{MIN_LENGTH_MM:g} .. {MAX_LENGTH_MM:g} mm")
     if abs(row.thickness_mm) > MAX_LENGTH_MM:
         fail(f"thickness {row.thickness_mm:g} mm is larger than the supported {MAX_LENGTH_MM:g} mm")
     if row.thickness_mm < 0 and not last:
@@ -171,6 +184,36 @@ def _check_row(row: SourceRow, last: bool, where: str) -> None:
         fail(f"refractive index {row.index_after:g} is outside 1 .. {MAX_INDEX:g}")
     if row.abbe_vd < 0:
         fail(f"Abbe number {row.abbe_vd:g} is negative")
+
+
+def _radius_x(rows: list[SourceRow], source: str):
+    """(n,) x-z radii of ``rows`` (their radius where not given), None when no row is
+    toric; a row that cannot be toric is refused (:func:`toric.row_problem`)."""
+    rx = [r.radius_mm if r.radius_x_mm is None else r.radius_x_mm for r in rows]
+    for i, (row, r) in enumerate(zip(rows, rx)):
+        if row.radius_x_mm is None:
+            continue
+        before_air = i == 0 or rows[i - 1].index_after == AIR
+        why = toric.row_problem(row.radius_mm, r, row.asphere,
+                                before_air and row.index_after == AIR)
+        if why:
+            raise LensFileError(source, row.line, f"{row.label}: {why}")
+    out = np.array(rx, dtype=np.float64)
+    return out if any(a != r.radius_mm for a, r in zip(rx, rows)) else None
+
+
+def _check_power(lens: LensPrescription, source: str) -> None:
+    """OpticsError when the lens has no power (in neither meridian of an anamorphic
+    lens); a :class:`LensImportWarning` when an anamorphic lens has none in one."""
+    if not lens.is_anamorphic:
+        paraxial_data(lens)
+        return
+    m = anamorphic_data(lens).afocal
+    if m:
+        warnings.warn(LensImportWarning(
+            f"{source}: the lens has no power in {m} (afocal in {m}): it images only in the "
+            f"{'y' if m == 'x' else 'x'}-z plane (a line focus); EFL_{m} is infinite"),
+            stacklevel=4)
 
 
 def build_lens(rows: list[SourceRow], source: str, comments: list[str]) -> ImportedLens:
@@ -224,7 +267,7 @@ def build_lens(rows: list[SourceRow], source: str, comments: list[str]) -> Impor
                          for r in rows], dtype=np.float64)
     lens = LensPrescription(radius, thick, index, diam, abbe, source=source,
                             lines=tuple(r.line or 0 for r in rows), comments=tuple(comments),
-                            asphere=asph)
+                            asphere=asph, radius_x_mm=_radius_x(rows, source))
     if any(r.glass for r in rows):
         lens = lens.replace(glass=tuple(r.glass for r in rows))
     lens = clip_to_physical_apertures(lens)
@@ -232,7 +275,7 @@ def build_lens(rows: list[SourceRow], source: str, comments: list[str]) -> Impor
     if ap.any():
         lens = lens.replace(max_stop_diameter_mm=float(np.max(lens.aperture_diameter_mm[ap])))
     try:
-        paraxial_data(lens)
+        _check_power(lens, source)
     except OpticsError as e:
         raise OpticsError(f"{e.message} (imported from {source})") from None
     notes = []

@@ -26,7 +26,12 @@ Conversion to a Kolb/pbrt file:
   the image) is an even asphere (:mod:`povlens.lens.asphere`), written as the row's
   ``#!asphere`` comment.  (lentil's own loader reads only A4 and A8 and traces with a
   conic constant of 1; povlens takes the table as the patent states it.)
-* cylinders and zoom thickness lists are refused, naming the row.
+* ``lens-geometry: "cyl-y"`` (lentil's cylinder with its axis along y: the surface
+  curves in x only, power in the x-z meridian) is a toric row ``0 ... #!toric rx=R``,
+  ``"cyl-x"`` (axis along x, curving in y only) ``R ... #!toric rx=0``
+  (:mod:`povlens.lens.toric`); an ``aspherical-equation`` on a ``cyl-x`` row shapes its
+  y-z profile, on a ``cyl-y`` row it is refused.
+* zoom thickness lists are refused, naming the row.
 """
 
 from __future__ import annotations
@@ -140,10 +145,13 @@ def _source_row(s: dict, k: int, before_is_air: bool, fail) -> SourceRow:
     """Row ``k`` of the table as a :class:`SourceRow` (``fail(reason)`` raises)."""
     material = _text(s.get("material")).strip() or "?"
     geometry = s.get("lens-geometry", "spherical")
-    if geometry not in (None, "spherical", "aspherical"):
-        fail(f"lens-geometry '{geometry}' (material {material}): povlens holds spherical "
-             f"and even-aspheric surfaces only", "pick a design without cylinders")
+    if geometry not in (None, "spherical", "aspherical", "cyl-x", "cyl-y"):
+        fail(f"lens-geometry '{geometry}' (material {material}): povlens reads spherical, "
+             f"aspherical, cyl-x and cyl-y surfaces")
     asph = _lentil_asphere(s.get("aspherical-equation"), fail)
+    if geometry == "cyl-y" and asph is not None:
+        fail("an aspherical-equation on a cyl-y row (a cylinder curving in x): povlens's "
+             "toric rows take aspheric terms on their y-z profile only (cyl-x)")
     if isinstance(s.get("thickness"), list):
         fail("thickness is a list (a zoom lens: it changes with the zoom position); povlens "
              "imports fixed focal lengths only")
@@ -168,7 +176,15 @@ def _source_row(s: dict, k: int, before_is_air: bool, fail) -> SourceRow:
     note = what + (f"; flat (radius {radius:g} in the source)" if flat and radius else "")
     if asph is not None:
         note += "; asphere"
-    return SourceRow(0.0 if flat else radius, thickness, index, 2 * housing, abbe,
+    r = 0.0 if flat else radius
+    if geometry in ("cyl-x", "cyl-y") and r != 0.0:
+        # cyl-y: cylinder axis along y, curving in x only; cyl-x: curving in y only
+        note += f"; {geometry}: " + ("curves in x only" if geometry == "cyl-y"
+                                      else "curves in y only")
+        ry, rx = (0.0, r) if geometry == "cyl-y" else (r, 0.0)
+        return SourceRow(ry, thickness, index, 2 * housing, abbe, f"row {k}", note,
+                         asphere=asph, radius_x_mm=rx)
+    return SourceRow(r, thickness, index, 2 * housing, abbe,
                      f"row {k}", note, asphere=asph)
 
 

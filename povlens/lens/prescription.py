@@ -22,6 +22,15 @@ File format (pbrt / Kolb et al. 1995), one row per surface, object side first:
   formula gives ``--dispersion`` its n(lambda); the row's index stays as stated.
 * A row may end with ``#!asphere k=.. a4=..``: the row is an even asphere of base
   radius ``radius`` (:mod:`povlens.lens.asphere`; other Kolb readers see the sphere).
+* A row may end with ``#!toric rx=R``: the row is anamorphic (a cylinder or toroid,
+  Zemax's TOROIDAL, :mod:`povlens.lens.toric`): ``radius`` is its y-z section and R
+  (mm, 0 = flat in x) the radius of its x-z section, so other Kolb readers see the exact
+  y-z meridian.  lentil's ``cyl-y`` (curving in x only) is ``0 ... #!toric rx=R``, its
+  ``cyl-x`` (curving in y only) ``R ... #!toric rx=0``.  With ``#!asphere`` on the same
+  row the terms shape the y-z profile (k, and a2.. on y^2, y^4, ...), as Zemax's
+  TOROIDAL does.  ``rx`` equal to ``radius`` is a sphere (refused with asphere terms,
+  which would be ambiguous); ``#!toric`` on an aperture row (radius 0, air on both
+  sides) is refused.
 
 The old Kolb / CS348B tables (100 mm scale: ``dgauss.dat``, ``wide.dat``) store
 in column 2 the distance from the *previous* vertex.  They are recognised by
@@ -43,6 +52,7 @@ import numpy as np
 from povlens.errors import LensClipWarning, LensFileError
 from povlens.lens import glass_catalog as _gc
 from povlens.lens import asphere as _asph
+from povlens.lens import toric as _toric
 from povlens.util.files import decode_text
 from povlens.util.resources import LENS_DIR
 from povlens.util.files import write_bytes
@@ -93,6 +103,8 @@ class LensPrescription:
     lines : 1-based line number of each row in the source (0 if not from a file).
     file_format : ``"pbrt"`` or ``"kolb-axpos"`` (converted on reading).
     comments : the comment lines of the file header.
+    radius_x_mm : (n_surfaces,) radii of the x-z sections (``#!toric``), or None when
+        every row is rotationally symmetric (``radius_mm`` is then both sections').
     """
 
     radius_mm: np.ndarray
@@ -115,6 +127,11 @@ class LensPrescription:
     #: Even-asphere data (n_surfaces, 9): conic k, a2 .. a16 (:mod:`povlens.lens.asphere`),
     #: or None when every row is a sphere; zero rows are spheres.
     asphere: np.ndarray | None = None
+    #: Radii (n_surfaces,) of the rows' x-z sections (mm, 0 = flat in x), or None when
+    #: every row is rotationally symmetric; a row whose entry differs from ``radius_mm``
+    #: (its y-z section) is toric (:mod:`povlens.lens.toric`), on other rows it equals
+    #: ``radius_mm``.
+    radius_x_mm: np.ndarray | None = None
 
     # ----- derived geometry ------------------------------------------------
     @property
@@ -135,8 +152,17 @@ class LensPrescription:
 
     @property
     def is_aperture(self) -> np.ndarray:
-        """True for planar rows with air on both sides: apertures, which clip only."""
-        return (self.radius_mm == 0.0) & (self.index_before == AIR) & (self.index_after == AIR)
+        """True for planar rows with air on both sides: apertures, which clip only.
+        (A toric row flat in y but curved in x is not planar.)"""
+        flat = self.radius_mm == 0.0
+        if self.radius_x_mm is not None:
+            flat = flat & (self.radius_x_mm == 0.0)
+        return flat & (self.index_before == AIR) & (self.index_after == AIR)
+
+    @property
+    def is_anamorphic(self) -> bool:
+        """True when some row's x-z radius differs from its y-z radius (a toric row)."""
+        return bool(_toric.toric_rows(self).any())
 
     @property
     def aperture_radius_mm(self) -> np.ndarray:
@@ -158,6 +184,8 @@ class LensPrescription:
             h.update(np.ascontiguousarray(a, dtype="<f8").tobytes())
         if _asph.aspheric_rows(self).any():     # spherical lenses keep their old hashes
             h.update(b"asphere" + np.ascontiguousarray(self.asphere, dtype="<f8").tobytes())
+        if self.is_anamorphic:                  # rotationally symmetric ones too
+            h.update(b"toric" + np.ascontiguousarray(self.radius_x_mm, dtype="<f8").tobytes())
         return h.hexdigest()
 
     # ----- modified copies ----------------------------------------------------
@@ -196,6 +224,8 @@ class LensPrescription:
                             aperture_diameter_mm=self.aperture_diameter_mm[sl],
                             abbe_vd=self.abbe_vd[sl], lines=self.lines[sl], glass=self.glass[sl],
                             asphere=None if self.asphere is None else self.asphere[sl],
+                            radius_x_mm=(None if self.radius_x_mm is None
+                                         else self.radius_x_mm[sl]),
                             **_shape_rows(self, first))
 
     def __eq__(self, other) -> bool:  # optical equality, used by round-trip tests
@@ -206,7 +236,8 @@ class LensPrescription:
             (self.index_after, other.index_after),
             (self.aperture_diameter_mm, other.aperture_diameter_mm),
             (self.abbe_vd, other.abbe_vd),
-            (_asphere_or_zeros(self), _asphere_or_zeros(other))))
+            (_asphere_or_zeros(self), _asphere_or_zeros(other)),
+            (_toric.radius_x_or_y(self), _toric.radius_x_or_y(other))))
 
     __hash__ = None
 
@@ -350,9 +381,10 @@ def parse_lens_text(text: str, source: str = "<string>") -> LensPrescription:
         raise LensFileError(source, lines[-1], f"the medium after the last surface has index "
                             f"{index[-1]:g}; the film must be in air (index 0 or 1)")
 
+    asphere = _asphere_rows(text, lines, radius, index, source)
     lens = LensPrescription(radius, thick, index, diam, abbe, source=source, lines=tuple(lines),
-                            file_format=file_format, comments=tuple(comments),
-                            asphere=_asphere_rows(text, lines, radius, index, source))
+                            file_format=file_format, comments=tuple(comments), asphere=asphere,
+                            radius_x_mm=_toric_radii(text, lines, radius, index, asphere, source))
     lens = _gc.with_glass_rows(lens, glass_rows)
     lens = clip_to_physical_apertures(lens)
     ap = lens.is_aperture
@@ -387,6 +419,43 @@ def _asphere_rows(text: str, lines: list, radius: np.ndarray, index: np.ndarray,
                                 f"both sides) with asphere terms, which would bend no light",
                                 "give the row the index of its glass, or remove its '#!asphere'")
     return out if np.any(out != 0.0) else None
+
+
+def _toric_radii(text: str, lines: list, radius: np.ndarray, index: np.ndarray,
+                 asphere: np.ndarray | None, source: str) -> np.ndarray | None:
+    """(n_rows,) x-z radii of the rows (their ``#!toric rx=R``, else their radius), None
+    when no row is toric.  Errors name the line: a directive on a line without a row or
+    given twice, a bad value, a row that cannot be toric (:func:`toric.row_problem`)."""
+    row_of_line = {ln: i for i, ln in enumerate(lines)}
+    out = radius.copy()
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        low = line.lower()
+        at = low.find("#" + _toric.DIRECTIVE)
+        if at < 0:
+            continue
+        if lineno not in row_of_line:
+            raise LensFileError(source, lineno, "'#!toric' stands on a line without a row",
+                                "put it at the end of the row it belongs to")
+        if low.find("#" + _toric.DIRECTIVE, at + 1) >= 0:
+            raise LensFileError(source, lineno, "'#!toric' is given twice on one row")
+        i = row_of_line[lineno]
+        try:
+            rx = _toric.parse_directive(line[at + 1:], "#!toric: ")
+        except ValueError as e:
+            raise LensFileError(source, lineno, str(e)) from None
+        if rx != 0.0 and not MIN_LENGTH_MM <= abs(rx) <= MAX_LENGTH_MM:
+            raise LensFileError(source, lineno, f"#!toric: rx {rx:g} mm is outside the "
+                                f"supported range {MIN_LENGTH_MM:g} .. {MAX_LENGTH_MM:g} mm "
+                                f"(0 = flat in x)")
+        before = index[i - 1] if i > 0 else AIR
+        why = _toric.row_problem(float(radius[i]), rx, None if asphere is None else asphere[i],
+                                 before == AIR and index[i] == AIR)
+        if why:
+            raise LensFileError(source, lineno, f"row {i}: '#!toric rx={rx:g}': {why}",
+                                "give the row the radius of its y-z section and rx that of "
+                                "its x-z section, on a surface with glass on a side")
+        out[i] = rx
+    return out if np.any(out != radius) else None
 
 
 def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
@@ -428,8 +497,7 @@ def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
     """
     a, why = _surface_ends(lens)
     for i in range(lens.n_surfaces - 1):
-        meet = _meeting_height_mm(_asph.row_sag(lens, i), _asph.row_sag(lens, i + 1),
-                                  lens.thickness_mm[i], min(a[i], a[i + 1]))
+        meet = _meeting_height_mm(_gap_function(lens, i), min(a[i], a[i + 1]))
         if meet is None:
             continue
         glass = lens.index_after[i] != AIR
@@ -467,12 +535,14 @@ def clip_to_physical_apertures(lens: LensPrescription) -> LensPrescription:
 
 def _surface_ends(lens: LensPrescription) -> tuple[np.ndarray, dict]:
     """(n_surfaces,) semi-apertures (mm) clipped where each surface ends (a sphere at
-    |R|, an asphere at its conic's rim), and why, by row."""
+    |R|, an asphere at its conic's rim, a toric row at the edge of its domain,
+    :func:`toric.row_domain_radius_mm`), and why, by row."""
     a = lens.aperture_radius_mm.copy()
     why: dict[int, str] = {}
     radius = lens.radius_mm
-    aspheric = _asph.aspheric_rows(lens)
-    for i in np.flatnonzero((radius != 0.0) & ~aspheric & (a > np.abs(radius))):
+    toric = _toric.toric_rows(lens)
+    aspheric = _asph.aspheric_rows(lens) & ~toric
+    for i in np.flatnonzero((radius != 0.0) & ~aspheric & ~toric & (a > np.abs(radius))):
         a[i] = abs(radius[i])
         why[i] = f"the sphere of radius {abs(radius[i]):g} mm ends"
     for i in np.flatnonzero(aspheric):
@@ -480,6 +550,11 @@ def _surface_ends(lens: LensPrescription) -> tuple[np.ndarray, dict]:
         if a[i] > rim:
             a[i] = rim
             why[i] = f"the asphere's conic (base radius {radius[i]:g} mm) ends"
+    for i in np.flatnonzero(toric):
+        rim = _toric.row_domain_radius_mm(lens, i)
+        if a[i] > rim:
+            a[i] = rim
+            why[i] = (f"the {_toric.describe_row(radius[i], lens.radius_x_mm[i])} ends")
     return a, why
 
 
@@ -487,13 +562,34 @@ def _surface_ends(lens: LensPrescription) -> tuple[np.ndarray, dict]:
 CLIP_WARNINGS_SHOWN = 5
 
 
-def _meeting_height_mm(sag0, sag1, thickness_mm: float, r_max_mm: float) -> float | None:
-    """Height (mm) in (0, r_max_mm) where a surface of sag function ``sag1`` (r -> mm),
-    ``thickness_mm`` behind one of sag ``sag0``, meets it; None when they do not cross
-    (or cross at the axis, which no clipping mends)."""
-    def gap(r):
-        return thickness_mm + sag1(r) - sag0(r)
+#: Azimuths (over a quarter turn, both meridians included) at which the gap between
+#: neighbouring surfaces is taken when one of them is toric (not rotationally symmetric).
+_GAP_ANGLES = np.linspace(0.0, 0.5 * math.pi, 17)
 
+
+def _gap_function(lens: LensPrescription, i: int):
+    """Function r_mm (any shape) -> the axial gap (mm) from row ``i`` to row ``i + 1`` at
+    height r: ``t_i + s_(i+1)(r) - s_i(r)``; when either row is toric, the smallest over
+    the azimuths :data:`_GAP_ANGLES` (the surfaces are even in x and y)."""
+    t = lens.thickness_mm[i]
+    toric = _toric.toric_rows(lens)
+    if not (toric[i] or toric[i + 1]):
+        sag0, sag1 = _asph.row_sag(lens, i), _asph.row_sag(lens, i + 1)
+        return lambda r: t + sag1(r) - sag0(r)
+    sag0, sag1 = _toric.row_sag_xy(lens, i), _toric.row_sag_xy(lens, i + 1)
+    cos, sin = np.cos(_GAP_ANGLES), np.sin(_GAP_ANGLES)
+
+    def gap(r):
+        r = np.asarray(r, dtype=np.float64)
+        x, y = r[..., None] * cos, r[..., None] * sin
+        return np.min(t + sag1(x, y) - sag0(x, y), axis=-1)
+    return gap
+
+
+def _meeting_height_mm(gap, r_max_mm: float) -> float | None:
+    """Height (mm) in (0, r_max_mm) where the gap between two neighbouring surfaces
+    (``gap``: r -> mm, :func:`_gap_function`) closes; None when they do not cross (or
+    cross at the axis, which no clipping mends)."""
     r = np.linspace(0.0, r_max_mm, _CROSSING_GRID)
     g = gap(r)
     if g.min() >= -CROSSING_TOLERANCE_MM:
@@ -516,8 +612,7 @@ def _check_surfaces_do_not_cross(lens: LensPrescription) -> None:
     for i in range(lens.n_surfaces - 1):
         rmax = min(lens.aperture_radius_mm[i], lens.aperture_radius_mm[i + 1])
         r = np.linspace(0.0, rmax, _CROSSING_GRID)
-        gap = (lens.thickness_mm[i] + _asph.row_sag(lens, i + 1)(r)
-               - _asph.row_sag(lens, i)(r))
+        gap = _gap_function(lens, i)(r)
         k = int(np.argmin(gap))
         tol = CROSSING_TOLERANCE_MM
         if gap[k] < -tol:
@@ -537,6 +632,7 @@ def format_lens(lens: LensPrescription) -> str:
         out.append(f"# converted from {lens.file_format} format by povlens")
     with_abbe = bool(np.any(lens.abbe_vd != 0.0))
     aspheric = _asph.aspheric_rows(lens)
+    toric = _toric.toric_rows(lens)
     out.append("# radius\tthickness\tindex\taperture" + ("\tabbe_vd" if with_abbe else ""))
     for i in range(lens.n_surfaces):
         n = 0.0 if lens.is_aperture[i] else lens.index_after[i]
@@ -544,6 +640,8 @@ def format_lens(lens: LensPrescription) -> str:
         if with_abbe:
             cols.append(lens.abbe_vd[i])
         row = "\t".join(f"{v:.17g}" for v in cols)
+        if toric[i]:
+            row += "\t" + _toric.format_directive(lens.radius_x_mm[i])
         if aspheric[i]:
             row += "\t" + _asph.format_directive(lens.asphere[i])
         out.append(row)

@@ -52,6 +52,10 @@ crosses it is blocked ("aperture" or "miss").  The sag here is summed term by te
 ``(2 c (1 + w) + (1 + k) c^3 r^2 / w) / (1 + w)^2``, w = sqrt(1 - (1 + k) c^2 r^2),
 equal to the fast tracer's ``c / w`` only algebraically.
 
+*Toric rows* (cylinders, toroids; :mod:`povlens.lens.reference_toric`) the same way, by
+bracketing and bisection of the sag written as the rotation of the y-z profile, with the
+normal from the gradient of the implicit surface.
+
 *Normal.*  From the sag derivative: ``N = (-k x, -k y, 1) / sqrt(1 + k^2 r^2)``,
 oriented along the travel sense.
 
@@ -97,6 +101,7 @@ import math
 
 import numpy as np
 
+from povlens.lens import reference_toric
 from povlens.lens.aperture_shape import T_MIN
 from povlens.lens.coordinates import vertex_z_mm
 from povlens.lens.prescription import LensPrescription
@@ -186,6 +191,7 @@ class _Surface:
     asphere: tuple | None = None   # (k, a2, .., a16) of an aspheric row, else None
     rho_mm: float = 0.0            # asphere: radius searched, min(clear, conic rim)
     sag_range_mm: tuple = (0.0, 0.0)   # asphere: (min, max) sag over r <= rho, widened
+    toric: object = None           # reference_toric.ToricSurface of a toric row, else None
 
 
 def _surfaces(lens: LensPrescription, film_distance_mm: float) -> list[_Surface]:
@@ -201,8 +207,13 @@ def _surfaces(lens: LensPrescription, film_distance_mm: float) -> list[_Surface]
                        is_aperture=bool(ap[i]), n_scene_side=n_prev, n_film_side=n_after,
                        shape=lens.aperture_shape if i == lens.aperture_shape_row else None)
         a = lens.asphere
-        if a is not None and any(float(v) != 0.0 for v in a[i]):
-            srf = _with_asphere(srf, tuple(float(v) for v in a[i]))
+        coef = tuple(float(v) for v in a[i]) if a is not None else (0.0,) * 9
+        r_x = radius if lens.radius_x_mm is None else float(lens.radius_x_mm[i])
+        if r_x != radius:            # toric: its terms (if any) shape the y-z profile
+            srf = dataclasses.replace(srf, toric=reference_toric.make_surface(
+                srf.c, coef, r_x, srf.r_clear_mm))
+        elif any(v != 0.0 for v in coef):
+            srf = _with_asphere(srf, coef)
         out.append(srf)
         n_prev = n_after
     return out
@@ -350,6 +361,11 @@ def _cylinder_crossing(x0: float, y0: float, dx: float, dy: float, radius: float
 def _intersect(srf: _Surface, x: float, y: float, s: float, dx: float, dy: float, ds: float,
                st: _RayState) -> tuple[float, float, float, float]:
     """Hit point (hx, hy, hs) on surface ``srf`` and the ray parameter t (mm)."""
+    if srf.toric is not None:
+        hit = reference_toric.intersect(srf.toric, x, y, s, dx, dy, ds)
+        if isinstance(hit, str):
+            raise _Blocked(hit)
+        return hit
     if srf.asphere is not None:
         return _intersect_asphere(srf, x, y, s, dx, dy, ds, st)
     c = srf.c
@@ -492,7 +508,12 @@ def _refract(srf: _Surface, hx: float, hy: float, dx: float, dy: float, ds: floa
     c = srf.c
     r2 = hx * hx + hy * hy
     q = 1.0 - c * c * r2
-    if srf.asphere is not None:
+    if srf.toric is not None:
+        n = reference_toric.unit_normal(srf.toric, hx, hy)
+        if n is None:
+            raise _Blocked("miss")                          # at the edge of its domain
+        nx, ny, ns = n
+    elif srf.asphere is not None:
         k = _asphere_slope_over_r(c, srf.asphere, r2)       # sag'(r) / r
         inv = 1.0 / math.sqrt(1.0 + k * k * r2)
         if not math.isfinite(inv) or inv == 0.0:

@@ -39,6 +39,10 @@ the ray misses the conic, from the vertex tangent plane.  At most
 with ``k = z'(r)/r``.  A ray that does not converge, lands beyond the conic's rim, or
 crosses the surface against the travel sense (``F'`` of the wrong sign) is blocked.
 
+Toric rows (cylinders, toroids) are met by :func:`povlens.lens.toric.intersect`: a
+cylinder in closed form (a quadric, root chosen as for the sphere), a toroid by Newton's
+method as the asphere, with the same blocking rules.
+
 Blocked rays
 ------------
 A ray is blocked at surface i when it misses the sphere (D < 0), meets it
@@ -61,6 +65,7 @@ from povlens.lens.aperture_shape import shape_margin_mm2
 from povlens.lens.asphere import aspheric_rows, domain_r2_mm2, sag_mm, slope_over_r
 from povlens.lens.coordinates import vertex_z_mm
 from povlens.lens.prescription import LensPrescription
+from povlens.lens.toric import intersect as toric_intersect, row_params, toric_rows
 
 __all__ = ["TraceResult", "UnclippedTrace", "trace_from_film", "trace_from_scene",
            "trace_unclipped_from_film", "stop_hits_from_film", "BACKWARD_TOLERANCE_MM"]
@@ -190,7 +195,13 @@ def _intersect_asphere(c: float, row: np.ndarray, vertex_z: float, x, y, z, dx, 
 
 
 def _hit(c: float, row, vertex_z: float, x, y, z, dx, dy, dz, sense: float):
-    """Hit point, blocked rays and unit normal at a sphere (``row`` None) or asphere."""
+    """Hit point, blocked rays and unit normal at a sphere (``row`` None), an asphere
+    (``row`` its 9 terms) or a toric row (``row`` a tuple (c_y, profile, c_x),
+    :func:`povlens.lens.toric.intersect`)."""
+    if isinstance(row, tuple):
+        c_y, profile, c_x = row
+        return toric_intersect(c_y, profile, c_x, vertex_z, x, y, z, dx, dy, dz, sense,
+                               BACKWARD_TOLERANCE_MM)
     if row is not None:
         return _intersect_asphere(c, row, vertex_z, x, y, z, dx, dy, dz, sense)
     hx, hy, hs, bad = _intersect(c, vertex_z, x, y, z, dx, dy, dz, sense)
@@ -198,7 +209,10 @@ def _hit(c: float, row, vertex_z: float, x, y, z, dx, dy, dz, sense: float):
 
 
 def _asphere_row(lens: LensPrescription, i: int):
-    """Row ``i``'s asphere data, or None for a sphere."""
+    """Row ``i``'s asphere data, (c_y, profile, c_x) for a toric row, or None for a
+    sphere."""
+    if lens.radius_x_mm is not None and toric_rows(lens)[i]:
+        return row_params(lens, i)
     return lens.asphere[i] if aspheric_rows(lens)[i] else None
 
 

@@ -137,7 +137,9 @@ def one_entry(tmp_path, **changes):
 
 
 @pytest.mark.parametrize("changes,match", [
-    ({"r0__lens_geometry": "cyl-y"}, r"row 0: lens-geometry 'cyl-y'"),
+    ({"r0__lens_geometry": "freeform"}, r"row 0: lens-geometry 'freeform'"),
+    ({"r0__lens_geometry": "cyl-y", "r0__aspherical_equation": [1e-6]},
+     r"row 0: an aspherical-equation on a cyl-y row"),
     ({"r4__aspherical_equation": "1e-6"}, r"row 4: aspherical-equation \"1e-6\" is not a list"),
     ({"r2__thickness": [23.3, 20.0, 18.0]}, r"row 2: thickness is a list \(a zoom lens"),
     ({"r1__ior": "glass"}, r"row 1: ior is \"glass\", not a number"),
