@@ -12,6 +12,14 @@ Object distances are measured from the film plane, as on a lens barrel
   of a bundle of real rays from the on-axis object point, spread evenly over
   the entrance pupil and traced through the real, stopped lens (rays the lens
   blocks are left out).
+
+An anamorphic lens (toric rows, :mod:`povlens.lens.toric`) has a paraxial focus per
+meridian (astigmatic foci, :func:`astigmatic_foci_mm`); its thick-lens answer is their
+mean (the medial focus; the one focus when a meridian has no power), and the exact one
+minimises the RMS spot of a full 2-D axial bundle through the elliptical entrance pupil
+(:func:`anamorphic_axial_bundle`: each axis filled to its meridian's pupil diameter and
+aimed through its meridian's pupil position), so both meridians count.  A rotationally
+symmetric lens is focused exactly as before.
 """
 
 from __future__ import annotations
@@ -22,14 +30,15 @@ import math
 import numpy as np
 
 from povlens.errors import OpticsError, ParameterError
-from povlens.lens.paraxial import ParaxialData, paraxial_data
+from povlens.lens.paraxial import (MERIDIANS, ParaxialData, entrance_pupil, paraxial_data,
+                                   primary_meridian)
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_scene
 from povlens.util.minimize import bounded_minimum  # scipy's, without its 0.5 s import
 
 __all__ = ["FocusResult", "thick_lens_film_distance_mm", "closest_focus_distance_mm",
            "exact_film_distance_mm", "focus", "UNITS_MM", "LENS_SIDE_UNITS", "to_mm",
-           "axial_bundle", "BUNDLE_START_MM"]
+           "axial_bundle", "BUNDLE_START_MM", "astigmatic_foci_mm", "anamorphic_axial_bundle"]
 
 UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 #: The unit of an object distance on the lens side (``povlens focus``, ``pupil``,
@@ -127,13 +136,70 @@ def axial_bundle(p: ParaxialData, film_distance_mm: float, distance_mm: float,
     return origin, direction
 
 
+def anamorphic_axial_bundle(lens: LensPrescription, film_distance_mm: float,
+                            distance_mm: float, unit_points: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """Rays of the on-axis object point ``distance_mm`` from the film through the
+    elliptical entrance pupil of an anamorphic lens, as :func:`axial_bundle` per axis:
+    ``unit_points`` (m, 2) on the unit disc, x scaled to half the x-meridian pupil
+    diameter and aimed through the x-meridian pupil position, y likewise (the two
+    pupils of an anamorphic lens differ in size and position).
+
+    Returns
+    -------
+    origin, direction : (m, 3) arrays (camera frame, mm and unit-free).
+    """
+    front_z = film_distance_mm + lens.total_track_mm
+    start_z = min(front_z + BUNDLE_START_MM, distance_mm)
+    m = len(unit_points)
+    origin, direction = np.empty((m, 3)), np.empty((m, 3))
+    origin[:, 2], direction[:, 2] = start_z, -1.0
+    for k, meridian in enumerate(("x", "y")):
+        ep_pos, epd, _ = entrance_pupil(lens, meridian)
+        pts = unit_points[:, k] * (0.5 * epd)
+        if math.isinf(distance_mm):
+            origin[:, k], direction[:, k] = pts, 0.0
+        else:
+            span = distance_mm - (front_z - ep_pos)   # object to this meridian's pupil
+            origin[:, k] = pts * ((distance_mm - start_z) / span)
+            direction[:, k] = pts / span
+    return origin, direction
+
+
+def astigmatic_foci_mm(lens: LensPrescription, distance_mm: float) -> dict[str, float]:
+    """Thick-lens film distance (rear vertex to film, mm) focusing each meridian of an
+    anamorphic lens on an object ``distance_mm`` from the film: {"x": .., "y": ..};
+    +inf in a meridian without power."""
+    out = {}
+    for meridian in MERIDIANS[::-1]:
+        try:
+            p = paraxial_data(lens, meridian)
+        except OpticsError:                # no power in this meridian (and only there)
+            out[meridian] = math.inf
+            continue
+        out[meridian] = thick_lens_film_distance_mm(lens, distance_mm, p)
+    return out
+
+
+def _medial_mm(foci: dict[str, float]) -> float:
+    """The mean of the finite per-meridian foci (the medial focus)."""
+    v = [f for f in foci.values() if math.isfinite(f)]
+    return sum(v) / len(v)
+
+
 def rms_spot_mm(lens: LensPrescription, film_distance_mm: float, distance_mm: float,
                 p: ParaxialData | None = None, n_rings: int = 16, pupil_fill: float = 1.0
                 ) -> tuple[float, int]:
-    """RMS radius (mm) on the film of an axial object's bundle; and how many rays passed."""
-    p = p or paraxial_data(lens)
-    disc = pupil_disc_points(n_rings) * (0.5 * p.entrance_pupil_diameter * pupil_fill)
-    origin, direction = axial_bundle(p, film_distance_mm, distance_mm, disc)
+    """RMS radius (mm) on the film of an axial object's bundle; and how many rays passed.
+    (An anamorphic lens's bundle fills its elliptical pupil, :func:`anamorphic_axial_bundle`;
+    ``p`` is not used for it.)"""
+    if lens.is_anamorphic:
+        origin, direction = anamorphic_axial_bundle(
+            lens, film_distance_mm, distance_mm, pupil_disc_points(n_rings) * pupil_fill)
+    else:
+        p = p or paraxial_data(lens)
+        disc = pupil_disc_points(n_rings) * (0.5 * p.entrance_pupil_diameter * pupil_fill)
+        origin, direction = axial_bundle(p, film_distance_mm, distance_mm, disc)
     r = trace_from_scene(lens, film_distance_mm, origin, direction)
     o, d = r.origin_mm[r.passed], r.direction[r.passed]
     if len(o) < 3:
@@ -148,10 +214,16 @@ def exact_film_distance_mm(lens: LensPrescription, distance_mm: float,
                            ) -> tuple[float, float]:
     """Film distance minimising the real-ray RMS spot of the axial object point.
 
-    Returns (film distance in mm, RMS spot radius in mm there).
+    Returns (film distance in mm, RMS spot radius in mm there).  An anamorphic lens
+    starts from its medial focus and minimises the spot of its 2-D bundle.
     """
-    p = p or paraxial_data(lens)
-    start = start_mm if start_mm is not None else thick_lens_film_distance_mm(lens, distance_mm, p)
+    p = p or paraxial_data(lens, primary_meridian(lens))
+    if start_mm is not None:
+        start = start_mm
+    elif lens.is_anamorphic:
+        start = _medial_mm(astigmatic_foci_mm(lens, distance_mm))
+    else:
+        start = thick_lens_film_distance_mm(lens, distance_mm, p)
     if not (start > 0 and math.isfinite(start)):
         # A diverging lens (or an object too close): the image is virtual, in front of
         # the rear vertex, and no film position behind the lens can receive it.
@@ -195,11 +267,14 @@ class FocusResult:
     exact_rms_spot_mm: float
     thick_lens_rms_spot_mm: float
     closest_focus_mm: float
+    #: An anamorphic lens's paraxial film distance per meridian ({"x": .., "y": ..}, mm;
+    #: +inf without power there), its astigmatic foci; None for other lenses.
+    astigmatic_foci_mm: dict | None = None
 
     def to_dict(self) -> dict:
         def num(v):
             return v if math.isfinite(v) else None
-        return {
+        out = {
             "distance_mm": num(self.distance_mm),
             "film_distance_mm": {"thick_lens": self.thick_lens_film_distance_mm,
                                  "exact": self.exact_film_distance_mm},
@@ -207,16 +282,39 @@ class FocusResult:
                             "exact": num(self.exact_rms_spot_mm)},
             "closest_focus_mm": self.closest_focus_mm,
         }
+        if self.astigmatic_foci_mm is not None:
+            out["astigmatic_foci_mm"] = {k: num(v) for k, v in self.astigmatic_foci_mm.items()}
+        return out
 
 
 def focus(lens: LensPrescription, distance_mm: float) -> FocusResult:
-    """Thick-lens and exact real-ray focus for an object ``distance_mm`` from the film."""
+    """Thick-lens and exact real-ray focus for an object ``distance_mm`` from the film.
+
+    For an anamorphic lens the thick-lens answer is the medial focus of its two
+    meridians (both reported in ``astigmatic_foci_mm``) and the exact one minimises the
+    RMS spot of a 2-D bundle filling its elliptical pupil (module docstring).
+    """
     if not (distance_mm > 0):
         raise ParameterError("distance_mm", distance_mm, f"distance_mm={distance_mm:g}: the "
                                                          f"object distance must be positive")
+    if lens.is_anamorphic:
+        return _anamorphic_focus(lens, float(distance_mm))
     p = paraxial_data(lens)
     thick = thick_lens_film_distance_mm(lens, distance_mm, p)
     exact, spot = exact_film_distance_mm(lens, distance_mm, p, thick)
     return FocusResult(float(distance_mm), float(thick), float(exact), float(spot),
                        float(rms_spot_mm(lens, thick, distance_mm, p)[0]),
                        float(closest_focus_distance_mm(lens, p)))
+
+
+def _anamorphic_focus(lens: LensPrescription, distance_mm: float) -> FocusResult:
+    """:func:`focus` of an anamorphic lens: medial thick-lens focus, 2-D RMS spot."""
+    foci = astigmatic_foci_mm(lens, distance_mm)
+    p = paraxial_data(lens, primary_meridian(lens))
+    thick = _medial_mm(foci)
+    exact, spot = exact_film_distance_mm(lens, distance_mm, p, thick)
+    closest = max(closest_focus_distance_mm(lens, paraxial_data(lens, m))
+                  for m, f in foci.items() if math.isfinite(f))
+    return FocusResult(distance_mm, float(thick), float(exact), float(spot),
+                       float(rms_spot_mm(lens, thick, distance_mm, p)[0]), float(closest),
+                       {k: float(v) for k, v in foci.items()})
