@@ -13,6 +13,7 @@ A render folder (``povlens convert -o OUTDIR``) holds
 ``exposure.txt``                          the composite's exposure 1 / (E/L)(0)
 ``illumination.json``                     the relative illumination of a field-mesh composite
 ``radiosity.rca``                         the radiosity samples every lens sample reads
+``radiosity.json``                        whether the lens samples share them, and why
 ``image.exr``, ``image.png``              the image (linear float; sRGB preview)
 ``samples/batch_BBB.pov``                 the mesh method's batch wrappers
 ``samples/batch_BBB.done``                make's marker: batch b is rendered (its samples' files)
@@ -173,6 +174,12 @@ class RenderFolder:
         """The radiosity samples of one pinhole pretrace, which every lens sample reads
         (:mod:`povlens.rendering.radiosity_cache`)."""
         return self.path / "radiosity.rca"
+
+    @property
+    def radiosity_choice(self) -> Path:
+        """Whether the lens samples share :meth:`radiosity_cache`, measured on two
+        samples (:func:`povlens.rendering.radiosity_cache.record_probe`)."""
+        return self.path / "radiosity.json"
 
     @property
     def illumination_json(self) -> Path:
@@ -386,7 +393,8 @@ class RenderFolder:
                     self.image_png.name, "view-*.exr"]
         if stale is None:
             patterns += [every + s for s in (_IMAGE, _BLOCKED, _MESH, _MASK)]
-            patterns += [self.exposure_txt.name, self.illumination_json.name]
+            patterns += [self.exposure_txt.name, self.illumination_json.name,
+                         self.radiosity_cache.name, self.radiosity_choice.name]
         out = [f for pattern in patterns for f in self.path.glob(pattern)]
         for k in stale or []:
             out += [self.samples / _sample_name(k, s)

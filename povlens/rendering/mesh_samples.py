@@ -51,7 +51,9 @@ from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_
 from povlens.rendering.pixel_sampler import pixel_sampler
 from povlens.util.files import write_text
 from povlens.util.images import write_exr
-from povlens.rendering.radiosity_cache import radiosity_cache_for, radiosity_read_args
+from povlens.rendering.radiosity_cache import (STATISTICS_SWITCHES, probes_missing,
+                                               radiosity_cache_for, radiosity_read_args,
+                                               record_probe, sharing_chosen)
 from povlens.util.signals import interrupts_deferred
 
 __all__ = ["render_samples", "render_batch", "sample_rows", "film_row_args",
@@ -167,12 +169,34 @@ class _SampleRenders:
         self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
         self.povray_s = 0.0
         self.povray_options = povray_options_of(plan.inputs)   # the user's, checked once
-        # the radiosity samples of one pretrace, made before the first sample if missing
-        self.radiosity = radiosity_read_args(radiosity_cache_for(plan, outdir), self.samples)
+        # the radiosity samples of one pretrace, made before the first sample that reads
+        # them; until the folder chose whether they pay, two samples measure that
+        self.radiosity: list[str] = []
+        self.probes: dict[int, str] = {}            # sample -> "own" / "shared", running
+        self.choosing = plan.povray.radiosity_cache and sharing_chosen(outdir) is None
+        if not self.choosing:
+            self.radiosity = radiosity_read_args(radiosity_cache_for(plan, outdir),
+                                                 self.samples)
+
+    def _radiosity_args(self, k: int) -> list[str]:
+        """Sample k's radiosity switches; while choosing, a probe's (module doc of
+        :mod:`povlens.rendering.radiosity_cache`), after waiting for the probes when
+        both measurements are running."""
+        while self.choosing:
+            kinds = [p for p in probes_missing(self.folder.path)
+                     if p not in self.probes.values()]
+            if kinds:
+                self.probes[k] = kinds[0]
+                cache = radiosity_cache_for(self.plan, self.folder.path) \
+                    if kinds[0] == "shared" else None
+                return [*radiosity_read_args(cache, self.samples), *STATISTICS_SWITCHES]
+            self._reap(block=True)
+        return self.radiosity
 
     def start(self, k: int) -> None:
         while len(self.running) >= self.limit:
             self._reap(block=True)
+        radiosity = self._radiosity_args(k)
         pv = self.plan.povray
         pov = self.folder.batch_wrapper(self.batch)
         tmp = None
@@ -185,7 +209,7 @@ class _SampleRenders:
                 "f.exr", pv.render_width, pv.render_height, threads=1,
                 library_paths=[Path(self.plan.inputs.scene).parent],
                 povray_options=self.povray_options,
-                extra_args=[*MESH_SWITCHES, *self.radiosity, f"Declare=PovlensFrame={k}",
+                extra_args=[*MESH_SWITCHES, *radiosity, f"Declare=PovlensFrame={k}",
                             *film_row_args(pv, render_rows(self.plan, k))])
             cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
             with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:
@@ -235,6 +259,14 @@ class _SampleRenders:
                                  hint="fix the scene, or run 'make' in the folder to see "
                                       "the command")
         os.replace(out, self.folder.sample_image(k))
+        kind = self.probes.pop(k, None)
+        if kind is not None and self.choosing:
+            share = record_probe(self.folder.path, kind,
+                                 (tmp / "stderr.txt").read_text(errors="replace"), k)
+            if share is not None:
+                self.choosing = False
+                cache = radiosity_cache_for(self.plan, self.folder.path) if share else None
+                self.radiosity = radiosity_read_args(cache, self.samples)
 
     def finish(self) -> None:
         while self.running:

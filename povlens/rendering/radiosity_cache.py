@@ -16,20 +16,52 @@ mesh plan of a scene whose ``global_settings`` hold ``radiosity``). The file is 
 the first render that needs it (``povlens render``, each batch of ``make``, each
 worker's copy of a cluster render) and renamed into place when complete, so renders
 racing to make it waste time, never read half a file.
+
+Whether sharing pays is measured, not guessed: a scene whose radiosity is cheap beside
+its tracing can lose by it (the pinhole render's cost, and lens samples that trace slower
+through the denser shared samples: ``gamma/gamma_showcase.pov``'s field-mesh sample
+traces in 1.3 s computing its own radiosity, 2.3 s reading the file), while
+``radiosity/cornell.pov``'s sample drops from 2.54 s to 1.05 s with the file. POV-Ray's
+"Radiosity Time" alone does not tell (patio-radio's sample spends 0.43 s in it and 3.9 s
+tracing, yet gains from the file: samples computed during the final trace count as
+trace time). So a render that has not chosen yet renders its first lens sample with its
+own radiosity and its second reading the shared samples, both with POV-Ray's statistics
+(``+GS``), and the cheaper in radiosity and trace time decides for the rest
+(:func:`record_probe`); ``radiosity.json`` keeps the numbers and the choice for every
+later batch (a batch of one sample records its measurement for the next). The pinhole
+render that saves the samples is a quarter of the image's size each way
+(:data:`CACHE_RENDER_SCALE`): the pretrace's samples are as many (cornell 3.0 s at 80x60
+against 4.6 s at 320x240, the file the same size), and a lens sample reading them takes
+1.88 s against 1.80 s.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import os
+import re
 from pathlib import Path
 
 from povlens.plan.options import povray_options_of
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.pov.process import render as povray_render
-from povlens.util.files import temporary_path
+from povlens.util.files import temporary_path, write_text
 
-__all__ = ["radiosity_cache_for", "radiosity_read_args"]
+__all__ = ["radiosity_cache_for", "radiosity_read_args", "sharing_chosen", "probes_missing",
+           "record_probe", "PROBES", "STATISTICS_SWITCHES", "CACHE_RENDER_SCALE"]
+
+#: The two measurements the choice compares: a lens sample computing its own radiosity,
+#: and one reading the shared samples.
+PROBES = ("own", "shared")
+#: The pinhole render saving the samples is this many times smaller each way than the
+#: image (at least :data:`CACHE_RENDER_MIN_PX` pixels each way).
+CACHE_RENDER_SCALE = 4
+CACHE_RENDER_MIN_PX = 32
+#: POV-Ray switches after povlens's quiet ones that print the statistics (to stderr).
+STATISTICS_SWITCHES = ("+GS",)
+_PHASE_S = r"{}:[^(\n]*\(([0-9.]+) seconds\)"
 
 
 def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
@@ -45,9 +77,11 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     -------
     Path or None
         ``RenderFolder(outdir).radiosity_cache``; made by one pinhole render of the
-        folder's ``pinhole.pov`` at the image's size, all cores.
+        folder's ``pinhole.pov`` at a quarter of the image's size each way, all cores.
+        None also when the folder's first lens sample found that sharing does not pay
+        (:func:`sharing_chosen`).
     """
-    if not plan.povray.radiosity_cache:
+    if not plan.povray.radiosity_cache or sharing_chosen(outdir) is False:
         return None
     folder = RenderFolder(outdir)
     cache = folder.radiosity_cache
@@ -55,8 +89,10 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
         return cache
     tmp = temporary_path(cache)
     image = temporary_path(folder.path / "radiosity-pretrace.exr")
+    w, h = (max(CACHE_RENDER_MIN_PX, math.ceil(n / CACHE_RENDER_SCALE))
+            for n in (plan.film.width_px, plan.film.height_px))
     try:
-        povray_render(folder.wrapper("pinhole"), image, plan.film.width_px, plan.film.height_px,
+        povray_render(folder.wrapper("pinhole"), image, w, h,
                       threads=os.cpu_count() or 1,
                       library_paths=[Path(plan.inputs.scene).parent],
                       povray_options=povray_options_of(plan.inputs),
@@ -75,3 +111,65 @@ def radiosity_read_args(cache: Path | None, cwd: Path) -> list[str]:
     if cache is None:
         return []
     return [f"Radiosity_File_Name={os.path.relpath(cache, cwd)}", "+RFI"]
+
+
+def _record(outdir) -> dict:
+    """``radiosity.json`` as a dict ({} when missing or unreadable: measured again)."""
+    try:
+        rec = json.loads(RenderFolder(outdir).radiosity_choice.read_text())
+    except (OSError, ValueError):
+        return {}
+    return rec if isinstance(rec, dict) else {}
+
+
+def sharing_chosen(outdir: str | os.PathLike) -> bool | None:
+    """Whether the lens samples of the folder share the radiosity samples, as
+    :func:`record_probe` chose it; None when not chosen yet."""
+    share = _record(outdir).get("share")
+    return share if isinstance(share, bool) else None
+
+
+def probes_missing(outdir: str | os.PathLike) -> list[str]:
+    """The measurements the choice still needs, in the order to make them:
+    ``"own"`` (a lens sample computing its own radiosity) and ``"shared"`` (one
+    reading the shared samples)."""
+    rec = _record(outdir)
+    return [kind for kind in PROBES if not isinstance(rec.get(kind), dict)]
+
+
+def _phase_seconds(statistics: str, phase: str) -> float:
+    """A phase's time in POV-Ray's statistics ("Radiosity Time: ... (1.392 seconds)");
+    0 when it is not there."""
+    m = re.search(_PHASE_S.format(re.escape(phase)), statistics)
+    return float(m.group(1)) if m else 0.0
+
+
+def record_probe(outdir: str | os.PathLike, kind: str, statistics: str,
+                 sample: int) -> bool | None:
+    """Record what a probing lens sample measured, and choose once both are there.
+
+    Parameters
+    ----------
+    outdir : the render folder.
+    kind : ``"own"`` or ``"shared"`` (:data:`PROBES`).
+    statistics : what the sample's POV-Ray printed with :data:`STATISTICS_SWITCHES`.
+    sample : its number (recorded).
+
+    Returns
+    -------
+    bool or None
+        The choice (``radiosity.json``'s ``share``): True when the sample that read the
+        shared samples took no longer in radiosity and tracing ("Radiosity Time" +
+        "Trace Time") than the one computing its own; None while one is missing.
+    """
+    rec = _record(outdir)
+    rec[kind] = {"sample": int(sample),
+                 "radiosity_s": _phase_seconds(statistics, "Radiosity Time"),
+                 "trace_s": _phase_seconds(statistics, "Trace Time")}
+    if all(isinstance(rec.get(k), dict) for k in PROBES):
+        own, shared = (rec[k]["radiosity_s"] + rec[k]["trace_s"] for k in PROBES)
+        rec["share"] = shared <= own
+        rec["rule"] = ("share when a lens sample reading the shared samples takes no longer "
+                       "in radiosity and tracing than one computing its own")
+    write_text(RenderFolder(outdir).radiosity_choice, json.dumps(rec) + "\n")
+    return rec.get("share")

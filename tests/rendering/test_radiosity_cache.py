@@ -78,3 +78,56 @@ def test_a_scene_without_radiosity_renders_as_before(tmp_path):
     plan = json.loads((tmp_path / "o" / "plan.json").read_text())
     assert "radiosity_cache" not in plan["povray"]
     assert not any(n.startswith("radiosity") for n in plan.get("notes", []))
+
+
+
+def test_two_samples_measure_whether_sharing_pays(tmp_path):
+    """Sample 0 renders with its own radiosity, sample 1 reading the shared samples, both
+    with POV-Ray's statistics; radiosity.json records both and the cheaper decides."""
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    out = tmp_path / "o"
+    _povlens("render", scene, *SIZE, "-o", out)
+    rec = json.loads((out / "radiosity.json").read_text())
+    assert rec["own"]["sample"] == 0 and rec["shared"]["sample"] == 1
+    assert rec["own"]["radiosity_s"] > 0 and rec["own"]["trace_s"] >= 0
+    own, shared = (rec[k]["radiosity_s"] + rec[k]["trace_s"] for k in ("own", "shared"))
+    assert rec["share"] is (shared <= own)
+    assert (out / "radiosity.rca").is_file()        # made for the shared probe
+    assert read_image(out / "image.exr")[..., :3].mean() > 0.05
+
+
+@pytest.mark.parametrize("share", [True, False])
+def test_a_recorded_choice_is_followed(tmp_path, share):
+    """A folder whose record says 'own' renders every sample without the file (none is
+    made); 'shared' makes it and every sample reads it; no probe runs again."""
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    out = tmp_path / "o"
+    _povlens("convert", scene, *SIZE[:-1], "-o", out)
+    record = {"share": share, "own": {"sample": 9, "radiosity_s": 1.0, "trace_s": 1.0},
+              "shared": {"sample": 8, "radiosity_s": 0.5, "trace_s": 1.0}}
+    (out / "radiosity.json").write_text(json.dumps(record))
+    _povlens("render", scene, *SIZE, "-o", out)
+    assert (out / "radiosity.rca").is_file() is share
+    assert json.loads((out / "radiosity.json").read_text()) == record
+    assert read_image(out / "image.exr")[..., :3].mean() > 0.05
+
+
+def test_the_choice_from_povray_statistics(tmp_path):
+    from povlens.rendering.radiosity_cache import probes_missing, record_probe, sharing_chosen
+    stats = ("Render Time:\n  Photon Time:      No photons\n"
+             "  Radiosity Time:   0 hours  0 minutes  1 seconds (1.392 seconds)\n"
+             "  Trace Time:       0 hours  0 minutes  1 seconds (1.149 seconds)\n")
+    assert sharing_chosen(tmp_path) is None and probes_missing(tmp_path) == ["own", "shared"]
+    assert record_probe(tmp_path, "own", stats, 0) is None       # one measurement: no choice
+    assert probes_missing(tmp_path) == ["shared"] and sharing_chosen(tmp_path) is None
+    faster = stats.replace("(1.392", "(0.106").replace("(1.149", "(0.943")
+    assert record_probe(tmp_path, "shared", faster, 1) is True   # cornell's numbers
+    assert sharing_chosen(tmp_path) is True and probes_missing(tmp_path) == []
+    (tmp_path / "radiosity.json").unlink()
+    record_probe(tmp_path, "own", stats.replace("(1.392", "(0.129").replace("(1.149", "(1.312"), 0)
+    slower = stats.replace("(1.392", "(0.043").replace("(1.149", "(2.297")
+    assert record_probe(tmp_path, "shared", slower, 1) is False  # gamma_showcase's
+    (tmp_path / "radiosity.json").write_text("{broken")
+    assert sharing_chosen(tmp_path) is None and probes_missing(tmp_path) == ["own", "shared"]
