@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from povlens.lens.asphere import TERM_NAMES, aspheric_rows
-from povlens.lens.paraxial import paraxial_data
+from povlens.lens.paraxial import anamorphic_data, paraxial_data, primary_meridian
+from povlens.lens.toric import describe_row, toric_rows
 from povlens.cli.common import add_lens_command, load_lens, print_json
 
 
@@ -18,19 +19,30 @@ def register(sub) -> None:
 
 
 def inspect_dict(lens) -> dict:
-    p = paraxial_data(lens)
+    """The lens and its paraxial data as a JSON-ready dict; an anamorphic lens's are its
+    primary meridian's (y unless it has power in x only), with both meridians' focal
+    lengths, f-numbers and foci and the squeeze under ``anamorphic``."""
+    meridian = primary_meridian(lens)
+    p = paraxial_data(lens, meridian)
     d = {"lens": lens.source, "format": lens.file_format, "surfaces": lens.n_surfaces}
     aspheric = aspheric_rows(lens)
+    toric = toric_rows(lens)
     d.update(p.to_dict())
     d["surface_rows"] = [
         {"radius": float(lens.radius_mm[i]), "thickness": float(lens.thickness_mm[i]),
          "index": float(lens.index_after[i]), "aperture": float(lens.aperture_diameter_mm[i]),
          "abbe_vd": float(lens.abbe_vd[i]),
-         "kind": ("aperture" if lens.is_aperture[i] else "asphere" if aspheric[i] else
+         "kind": ("aperture" if lens.is_aperture[i] else
+                  describe_row(lens.radius_mm[i], lens.radius_x_mm[i]).split()[0]
+                  if toric[i] else "asphere" if aspheric[i] else
                   "flat" if lens.radius_mm[i] == 0 else "sphere"),
+         **({"radius_x": float(lens.radius_x_mm[i])} if toric[i] else {}),
          **({"asphere": dict(zip(TERM_NAMES, map(float, lens.asphere[i])))} if aspheric[i]
             else {})}
         for i in range(lens.n_surfaces)]
+    if lens.is_anamorphic:
+        d["meridian"] = meridian
+        d["anamorphic"] = anamorphic_data(lens).to_dict()
     d["notes"] = notes(lens, p)
     return d
 
@@ -43,6 +55,11 @@ def notes(lens, p) -> list[str]:
     if not lens.is_aperture.any():
         out.append(f"no aperture row: {lens.row_label(p.stop_index)} limits the axial beam and "
                    f"is taken as the aperture stop")
+    if lens.is_anamorphic:
+        a = anamorphic_data(lens)
+        out.append("anamorphic: " + (f"afocal in {a.afocal} (no power there; a line image)"
+                                     if a.afocal else f"squeeze EFL_y / EFL_x = {a.squeeze:.4f}")
+                   + f"; its main first-order data are the {primary_meridian(lens)}-z plane's")
     if p.limiting_index != p.stop_index:
         out.append(f"the rim of {lens.row_label(p.limiting_index)} clips the paraxial axial beam "
                    f"before the stop does; the real f-number is slower than the nominal one")
@@ -62,8 +79,9 @@ def run(args) -> int:
     print(f"  {'row':>3} {'radius':>11} {'thickness':>10} {'index':>8} {'aperture':>9}  kind")
     for i, r in enumerate(d["surface_rows"]):
         mark = "  <- stop" if i == d["stop_index"] else ""
+        kind = (describe_row(r["radius"], r["radius_x"]) if "radius_x" in r else r["kind"])
         print(f"  {i:>3} {r['radius']:>11.4f} {r['thickness']:>10.4f} {r['index']:>8.5f} "
-              f"{r['aperture']:>9.4f}  {r['kind']}{mark}")
+              f"{r['aperture']:>9.4f}  {kind}{mark}")
     print()
     rows = [
         ("effective focal length", d["efl"]),
@@ -79,10 +97,24 @@ def run(args) -> int:
         ("stop diameter", d["stop_diameter"]),
         ("total track (front to rear vertex)", d["total_track"]),
     ]
+    rows += _anamorphic_rows(d.get("anamorphic"))
     for name, v in rows:
-        unit = "" if name == "f-number" else " mm"
-        print(f"  {name:<48} {v:>11.4f}{unit}")
+        unit = "" if name.startswith(("f-number", "anamorphic squeeze")) else " mm"
+        shown = f"{v:>11.4f}" if v is not None else f"{'inf':>11}"
+        print(f"  {name:<48} {shown}{unit}")
     print(f"  {'aperture stop':<48} {lens.row_label(d['stop_index']):>11}")
     for n in d["notes"]:
         print(f"  note: {n}")
     return 0
+
+
+def _anamorphic_rows(a: dict | None) -> list:
+    """The table rows of an anamorphic lens's two meridians (None: an infinite value)."""
+    if a is None:
+        return []
+    return [("effective focal length in x (x-z plane)", a["efl_x_mm"]),
+            ("effective focal length in y (y-z plane)", a["efl_y_mm"]),
+            ("anamorphic squeeze (EFL_y / EFL_x)", a["squeeze"]),
+            ("f-number in x", a["f_number_x"]), ("f-number in y", a["f_number_y"]),
+            ("paraxial focus in x from the rear vertex", a["focus_x_mm"]),
+            ("paraxial focus in y from the rear vertex", a["focus_y_mm"])]

@@ -15,7 +15,7 @@ versions and converters ASCII): global lines (``UNIT``, ``MODE``, ``NAME``, ``NO
 
 Surface 0 is the object, the last the image; the surfaces between are the lens.
 Read here: ``UNIT`` (MM, CM, IN, METER), ``MODE`` (SEQ only), ``NAME``, ``NOTE``,
-``MNUM``; per surface ``TYPE``, ``STOP``, ``CURV``, ``CONI``, ``PARM``, ``DISZ``,
+``MNUM``; per surface ``TYPE``, ``STOP``, ``CURV``, ``CONI``, ``PARM``, ``XDAT``, ``DISZ``,
 ``GLAS``, ``DIAM``, ``MEMA``, ``CLAP``, ``OBSC``/``SQAP``/``ELAP``/``UDAP``, ``COAT``,
 ``COMM``, ``SCBD``.  Other keywords (drawing, optimisation, tolerancing, solves whose
 values the file already holds) do not change the surfaces and are skipped.
@@ -26,8 +26,8 @@ Conversion to a Kolb/pbrt file (all lengths to mm):
 * the medium after a surface: ``GLAS`` absent -> air; ``___BLANK`` (a model glass) or
   a catalogue name with the nd and vd the line gives; a 6-digit glass code
   (``517642`` -> nd 1.517, vd 64.2); ``glasses`` (name -> (nd, vd)) overrides all.
-  A catalogue glass whose line holds Zemax's placeholder (nd 1.5, vd 40) has no index
-  in the file: nd and vd come from the glass catalogue (:mod:`povlens.lens.glass_catalog`,
+  A catalogue glass whose line holds Zemax's placeholder (nd 1.5, vd 40), or nd 0 (as
+  Thorlabs' files do), has no index in the file: nd and vd come from the glass catalogue (:mod:`povlens.lens.glass_catalog`,
   SCHOTT, OHARA, HOYA, CDGM, HIKARI, SUMITA); a name no catalogue holds is refused,
   naming the closest, unless ``glasses`` gives it.  A row whose glass the catalogue
   holds (and whose nd, vd match it) is written with ``#!glass MAKER:NAME``, which gives
@@ -42,9 +42,15 @@ Conversion to a Kolb/pbrt file (all lengths to mm):
   STANDARD or EVENASPH) make an even asphere (:mod:`povlens.lens.asphere`), written as
   the row's ``#!asphere`` comment; the coefficients are converted to mm
   (a_2i x unit^(1 - 2i));
-* refused, naming the surface: surface types other than STANDARD and EVENASPH, other
-  PARMs of an EVENASPH, mirrors, tilts and decenters, a stop inside glass or on an
-  aspheric face, a file without STOP.
+* ``TYPE TOROIDAL`` is a toric row (:mod:`povlens.lens.toric`, written with
+  ``#!toric rx=R``): CURV is the curvature of its y-z section, ``PARM 1`` its radius of
+  rotation R (the radius of its x-z section; 0 is Zemax's infinity, flat in x), CONI and
+  ``PARM 2..8`` (the coefficients of y^2 .. y^14) shape its y-z profile (``#!asphere``);
+  Thorlabs' cylindrical lenses (LJ..., LK...) are TOROIDAL.  Its Zernike terms
+  (``XDAT 3..``) are refused;
+* refused, naming the surface: surface types other than STANDARD, EVENASPH and
+  TOROIDAL, other PARMs of an EVENASPH or TOROIDAL, mirrors, tilts and decenters, a stop
+  inside glass or on an aspheric face, a file without STOP.
 """
 
 from __future__ import annotations
@@ -59,7 +65,7 @@ from pathlib import Path
 import numpy as np
 
 from povlens.errors import LensFileError
-from povlens.lens import glass_catalog
+from povlens.lens import glass_catalog, toric
 from povlens.lens.asphere import N_ASPHERE, scaled_asphere
 from povlens.lens.import_common import ImportedLens, LensImportWarning, SourceRow, build_lens
 from povlens.lens.prescription import LensPrescription, read_source_bytes, sag_mm
@@ -100,6 +106,7 @@ class ZmxSurface:
     mechanical_semi_diameter: float = 0.0
     clear_aperture: tuple[float, float] | None = None  # CLAP (min, max) radius
     dropped: list[tuple[str, int]] = dataclasses.field(default_factory=list)
+    xdat: dict = dataclasses.field(default_factory=dict)   # extra data: number -> value
     coating: str = ""
     comment: str = ""
     tilted: int = 0  # line of a non-zero SCBD, 0 if none
@@ -156,6 +163,8 @@ def _surface_line(s: ZmxSurface, key: str, args: list[str], rest: str, source: s
         s.conic = num(0, "conic constant")
     elif key == "PARM" and len(args) >= 2:
         s.parms[int(num(0, "number"))] = num(1, "value")
+    elif key == "XDAT" and len(args) >= 2:
+        s.xdat[int(num(0, "number"))] = num(1, "value")
     elif key == "DISZ":
         s.thickness = (math.inf if args and args[0].upper() == "INFINITY"
                        else num(0, "thickness"))
@@ -258,12 +267,24 @@ def _check_shape(s: ZmxSurface, source: str) -> None:
         if other:
             shown = ", ".join(f"PARM {k} = {v:g}" for k, v in sorted(other.items()))
             refuse(f"an even asphere with terms beyond r^16 ({shown}); PARM 1..8 are read")
+    elif s.type == "TOROIDAL":
+        other = {k: v for k, v in s.parms.items() if v != 0 and not 0 <= k <= N_ASPHERE - 1}
+        zernike = {k: v for k, v in s.xdat.items() if v != 0 and k >= 3}
+        if other:
+            shown = ", ".join(f"PARM {k} = {v:g}" for k, v in sorted(other.items()))
+            refuse(f"a toroidal surface with parameters beyond PARM 8 ({shown}); PARM 1 (the "
+                   f"radius of rotation) and 2..8 (y^2 .. y^14) are read")
+        if zernike:
+            refuse(f"a toroidal surface with Zernike terms (XDAT {min(zernike)} = "
+                   f"{zernike[min(zernike)]:g}); povlens reads its radius of rotation, conic "
+                   f"and y polynomial")
     elif s.type == "COORDBRK":
         refuse("a coordinate break (tilts or decenters the axis)")
     elif s.type == "PARAXIAL":
         refuse("a paraxial (ideal thin) lens surface")
     elif s.type != "STANDARD":
-        refuse(f"surface type {s.type}; povlens imports STANDARD and EVENASPH surfaces")
+        refuse(f"surface type {s.type}; povlens imports STANDARD, EVENASPH and TOROIDAL "
+               f"surfaces")
     if s.tilted:
         refuse(f"tilted or decentered (SCBD, line {s.tilted})")
     if s.thickness is not None and math.isinf(s.thickness):
@@ -284,6 +305,8 @@ def _medium(s: ZmxSurface, glasses: dict) -> tuple[float, float, str] | None:
         nd, vd = float(s.glass[3].replace(",", ".")), float(s.glass[4].replace(",", "."))
     except (IndexError, ValueError):
         nd = vd = math.nan
+    if nd == 0.0:
+        nd = math.nan          # 'GLAS N-BK7 0 0 0 0 ...' (Thorlabs' files): not stored
     code = re.fullmatch(r"(\d{3})(\d{3})(\.\d*)?", name)
     if code and (math.isnan(nd) or (nd, vd) == PLACEHOLDER_ND_VD):
         nd, vd = 1.0 + int(code[1]) / 1000.0, int(code[2]) / 10.0  # glass code: 517642
@@ -375,12 +398,15 @@ def _stop_rows(s: ZmxSurface, k: float, before_air: bool, after_air: bool, row: 
         raise LensFileError(source, s.line, f"{s.label}: the stop lies between two glasses",
                             "povlens needs the aperture stop in air; move the STOP to an air "
                             "space in the design program")
-    c = s.curvature / k  # 1/mm
-    if abs(c) * a > 1:
-        raise LensFileError(source, s.line, f"{s.label}: stop semi-diameter {a:g} mm exceeds "
-                            f"the radius of the surface")
-    # Toward the air the face bulges (no room lost) when c >= 0 in front, c <= 0 behind.
-    shift = 0.0 if (c >= 0 if before_air else c <= 0) else abs(float(sag_mm(c, a)))
+    shift = 0.0
+    rx = _radius_of_rotation_mm(s, k)
+    for c in (s.curvature / k,) + (() if not rx else (1.0 / rx,)):   # 1/mm, each section
+        if abs(c) * a > 1:
+            raise LensFileError(source, s.line, f"{s.label}: stop semi-diameter {a:g} mm "
+                                f"exceeds the radius of the surface")
+        # Toward the air the face bulges (no room lost) when c >= 0 in front, c <= 0 behind.
+        if not (c >= 0 if before_air else c <= 0):
+            shift = max(shift, abs(float(sag_mm(c, a))))
     if shift:
         _warn(source, s, f"the stop lies on a face that is concave toward the air; the aperture "
                          f"is placed in the plane of the face's rim, {shift:.6g} mm "
@@ -396,14 +422,26 @@ def _stop_rows(s: ZmxSurface, k: float, before_air: bool, after_air: bool, row: 
 
 
 def _zmx_asphere(s: ZmxSurface, k: float) -> tuple | None:
-    """(conic, a2 .. a16) in mm of ``s`` (lens unit ``k`` mm), None for a sphere."""
-    if s.curvature == 0 and s.type != "EVENASPH":
+    """(conic, a2 .. a16) in mm of ``s`` (lens unit ``k`` mm), None for a sphere; of a
+    TOROIDAL surface its y-z profile's (PARM 2..8 are a2 .. a14)."""
+    if s.curvature == 0 and s.type not in ("EVENASPH", "TOROIDAL"):
         return None                       # a conic of a plane is a plane
-    terms = [s.conic] + ([s.parms.get(j, 0.0) for j in range(1, N_ASPHERE)]
-                         if s.type == "EVENASPH" else [0.0] * (N_ASPHERE - 1))
+    if s.type == "EVENASPH":
+        poly = [s.parms.get(j, 0.0) for j in range(1, N_ASPHERE)]
+    elif s.type == "TOROIDAL":
+        poly = [s.parms.get(j, 0.0) for j in range(2, N_ASPHERE)] + [0.0]
+    else:
+        poly = [0.0] * (N_ASPHERE - 1)
+    terms = [s.conic] + poly
     if not any(terms):
         return None
     return tuple(float(v) for v in scaled_asphere(np.array(terms, dtype=np.float64), k))
+
+
+def _radius_of_rotation_mm(s: ZmxSurface, k: float) -> float | None:
+    """The x-z radius (mm, 0 = flat in x) of a TOROIDAL surface (its PARM 1, lens unit
+    ``k`` mm), None for other surfaces."""
+    return s.parms.get(1, 0.0) * k if s.type == "TOROIDAL" else None
 
 
 def _lens_rows(f: ZmxFile, glasses: dict, source: str) -> tuple[list[SourceRow], list[int]]:
@@ -443,8 +481,10 @@ def _lens_rows(f: ZmxFile, glasses: dict, source: str) -> tuple[list[SourceRow],
         what = "air" if after_air else f"{name} nd {nd:g}" + (f" vd {vd:g}" if vd else "")
         note = f"surface {s.number}: {what}" + (f"; {s.comment}" if s.comment else "")
         asph = _zmx_asphere(s, k)
+        rx = _radius_of_rotation_mm(s, k)
+        note += "; " + toric.describe_row(radius, rx) if rx not in (None, radius) else ""
         row = SourceRow(radius, t, nd, 2 * s.aperture_radius * k, vd, s.label,
-                        note + ("; asphere" if asph else ""), s.line, asph)
+                        note + ("; asphere" if asph else ""), s.line, asph, radius_x_mm=rx)
         if s.stop and asph and not (before_air and after_air):
             raise LensFileError(source, s.line, f"{s.label}: the stop lies on an aspheric "
                                 f"face", "move the STOP to a plane in the air beside it in the "

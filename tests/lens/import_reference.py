@@ -7,6 +7,11 @@ these, so the two must agree on the optics, not share code.
 A system is a list of surfaces ``(c, t, n_after)``: curvature (1/mm), thickness to the
 next surface (mm), index after; plus the index of the stop surface and the stop
 diameter.  The stop's height is its vertex plane's.
+
+Anamorphic sources (lentil ``cyl-x``/``cyl-y`` rows, Zemax ``TOROIDAL`` surfaces) are
+read per meridian (``meridian="y"`` or ``"x"``): the system then holds each surface's
+curvature in that plane, and the y-nu trace of it is that meridian's first-order optics
+(a toric surface has no twist, so the two planes do not mix paraxially).
 """
 from __future__ import annotations
 
@@ -27,6 +32,11 @@ def trace(surfaces, y, nu):
     return heights, y, nu
 
 
+def has_power(surfaces):
+    """Whether the system bends a ray entering parallel (False: afocal)."""
+    return trace(surfaces, 1.0, 0.0)[2] != 0.0
+
+
 def reference(surfaces, stop, stop_diameter):
     """EFL, f-number, entrance pupil (from the first vertex) and exit pupil (from the last
     vertex) positions, positive toward the film."""
@@ -41,15 +51,18 @@ def reference(surfaces, stop, stop_diameter):
             "entrance_pupil_position": entrance, "exit_pupil_position": exit_}
 
 
-def lentil_system(path, lens_id, table="optical-elements-patent"):
+def lentil_system(path, lens_id, table="optical-elements-patent", meridian="y"):
     """A lentil entry: |radius| >= 9999 flat, the iris (any case) the stop, air where ior
     is null.  Without an iris, the stop is the surface that limits the axial beam: the
     largest ratio of the marginal ray's height to the semi-aperture (the housing radius,
-    or where a sphere ends)."""
+    or where a sphere ends).  In ``meridian`` "y" a ``cyl-y`` row (lentil's cylinder with
+    its axis along y: curved in x) is flat and a ``cyl-x`` row curved; in "x" the other
+    way round."""
     rows = json.load(open(path))[lens_id][table]
+    flat_here = "cyl-x" if meridian == "x" else "cyl-y"
     surfaces, stop, stop_d = [], None, None
     for k, r in enumerate(rows):
-        flat = abs(r["radius"]) >= 9999
+        flat = abs(r["radius"]) >= 9999 or r.get("lens-geometry") == flat_here
         if str(r["material"]).lower() == "iris":
             stop, stop_d = k, 2 * r["housing-radius"]
             n = surfaces[-1][2] if surfaces else 1.0
@@ -73,7 +86,11 @@ def zmx_blocks(text):
         get = lambda key: re.search(rf"^\s+{key} (.*)$", chunk, re.M)  # noqa: E731
         glas = get("GLAS")
         disz = get("DISZ")
+        kind = get("TYPE")
+        parm1 = re.search(r"^\s+PARM 1 (\S+)", chunk, re.M)
         blocks.append({
+            "type": kind.group(1).split()[0] if kind else "STANDARD",
+            "rotation": float(parm1.group(1)) * unit if parm1 else 0.0,
             "c": float(get("CURV").group(1).split()[0]) / unit,
             "t": (0.0 if disz is None or disz.group(1).startswith("INFINITY")
                   else float(disz.group(1).split()[0]) * unit),
@@ -83,9 +100,10 @@ def zmx_blocks(text):
     return blocks
 
 
-def zmx_system(path, glasses=None):
+def zmx_system(path, glasses=None, meridian="y"):
     """A .zmx lens (object and image dropped, leading flat surfaces in air dropped): the
-    stop at its surface's vertex."""
+    stop at its surface's vertex.  In ``meridian`` "x" a TOROIDAL surface's curvature is
+    1 / its radius of rotation (PARM 1; 0 is flat)."""
     raw = open(path, "rb").read()
     text = raw.decode("utf-16") if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else raw.decode()
     blocks = zmx_blocks(text)[1:-1]
@@ -97,6 +115,8 @@ def zmx_system(path, glasses=None):
             n_after = glasses[b["glass"][0]]
         else:
             n_after = float(b["glass"][3])
+        if meridian == "x" and b["type"] == "TOROIDAL":
+            b = dict(b, c=1.0 / b["rotation"] if b["rotation"] else 0.0)
         dummy = b["c"] == 0 and n == 1.0 and n_after == 1.0 and not b["stop"]
         if dummy and not surfaces:
             n = n_after
