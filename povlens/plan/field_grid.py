@@ -27,8 +27,8 @@ import numpy as np
 from povlens.plan.schema import FieldMeshSettings
 from povlens.pov.field_emulation import ray_error_px
 from povlens.pov.field_mesh import build_field_mesh, uv_model
-from povlens.pupil.field import PupilMap, bounding_disc_radius_mm, concentric_disc_mm, trace_field
-from povlens.pupil.field_domain import field_domain
+from povlens.pupil.field import PupilMap, concentric_disc_mm, trace_field
+from povlens.pupil.grid_field_domain import bounding_disc_for, field_domain_for
 
 __all__ = ["choose_field_mesh", "certification_pupil_points", "pixel_subset", "interleave_for",
            "TARGET_PX", "LIMIT_PX", "EPS_CHOICES", "PASS_FACE_BUDGET", "MAX_INTERLEAVE"]
@@ -131,7 +131,8 @@ def choose_field_mesh(lens, film_distance_mm: float, film, table, placement, efl
     ----------
     lens, film_distance_mm, film : the stopped-down lens, its film distance (mm) and
         the film.
-    table : the plan's :class:`povlens.pupil.table.PupilTable`.
+    table : the plan's :class:`povlens.pupil.table.PupilTable` (or
+        :class:`povlens.pupil.grid_table.GridPupilTable` of an anamorphic lens).
     placement : :class:`povlens.pupil.rays.ScenePlacement`.
     efl_mm : the focal length (the pixel angle is pitch / efl).
     povray_version : POV-Ray's version (its sampling model).
@@ -148,8 +149,8 @@ def choose_field_mesh(lens, film_distance_mm: float, film, table, placement, efl
         return None, (f"POV-Ray {povray_version}'s mesh-camera sampling was not measured "
                       f"(only 3.7.0.x's), so lens samples are rendered with a face per pixel")
     model = uv_model(W, H, CHECK_JITTER, povray_version)
-    radius = bounding_disc_radius_mm(table)
-    domain = field_domain(table)
+    radius = bounding_disc_for(table)          # radial table, or the grid of an anamorphic lens
+    domain = field_domain_for(table)
     pa = film.pixel_pitch_mm / abs(efl_mm)
     ctx = (lens, film_distance_mm, film, table.plane_z_mm, placement, pa, model, domain)
     rows, cols = pixel_subset(W, H)

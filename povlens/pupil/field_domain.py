@@ -45,8 +45,8 @@ import math
 
 import numpy as np
 
-__all__ = ["FieldDomain", "field_domain", "disc_domain", "DOMAIN_MARGIN", "N_RADII",
-           "FIT_DEGREE"]
+__all__ = ["FieldDomain", "field_domain", "disc_domain", "upper_fit", "saturate",
+           "DOMAIN_MARGIN", "N_RADII", "FIT_DEGREE", "SATURATION"]
 
 #: Film radii the fit samples (with the table's knots).
 N_RADII = 193
@@ -80,11 +80,7 @@ class FieldDomain:
     def _axes(self, film_xy: np.ndarray):
         f = np.asarray(film_xy, dtype=np.float64).reshape(-1, 2)
         s = np.einsum("ij,ij->i", f, f) / (self.radius_mm * self.radius_mm)
-        # beyond R no light passes; the polynomials are held near their value at R
-        # (s -> 1 + d (1 - exp((1 - s) / d)), continuous with its slope, below 1 + d),
-        # so the ray field stays smooth and bounded where a mesh reaches past the edge
-        d = SATURATION
-        s = np.where(s <= 1.0, s, 1.0 + d * (1.0 - np.exp(np.minimum(1.0 - s, 0.0) / d)))
+        s = saturate(s)
         c = np.polynomial.polynomial.polyval(s, self.centre)
         b = np.polynomial.polynomial.polyval(s, self.tangential)
         d = np.polynomial.polynomial.polyval(s, self.radial_excess)
@@ -144,7 +140,16 @@ def _polygon_extents(table, radii):
     return out
 
 
-def _upper_fit(X: np.ndarray, y: np.ndarray, iterations: int = 12) -> np.ndarray:
+def saturate(s: np.ndarray) -> np.ndarray:
+    """s held below 1 + :data:`SATURATION` beyond 1: beyond the table's last film point no
+    light passes, and the polynomials are held near their value there
+    (s -> 1 + d (1 - exp((1 - s) / d)), continuous with its slope), so the ray field stays
+    smooth and bounded where a mesh reaches past the edge."""
+    d = SATURATION
+    return np.where(s <= 1.0, s, 1.0 + d * (1.0 - np.exp(np.minimum(1.0 - s, 0.0) / d)))
+
+
+def upper_fit(X: np.ndarray, y: np.ndarray, iterations: int = 12) -> np.ndarray:
     """Least-squares coefficients of X c ~ y that weigh points below the fit
     :data:`UPPER_WEIGHT` times as much (asymmetric least squares)."""
     w = np.ones(len(y))
@@ -203,9 +208,9 @@ def _fitted_domain(table, ext, degree: int) -> FieldDomain:
     centre = np.linalg.lstsq(sw * r[:, None] * S, sw[:, 0] * cx, rcond=None)[0]
     kappa = np.array([float(np.sqrt(((e[4][:, 0] - e[1]) / e[2]) ** 2
                                     + (e[4][:, 1] / e[3]) ** 2).max()) for e in ext])
-    tang = _upper_fit(sw * S, sw[:, 0] * kappa * hy)
+    tang = upper_fit(sw * S, sw[:, 0] * kappa * hy)
     b_fit = S @ tang
-    excess = _upper_fit(sw * s[:, None] * S, sw[:, 0] * (kappa * hx - b_fit))
+    excess = upper_fit(sw * s[:, None] * S, sw[:, 0] * (kappa * hx - b_fit))
     a_fit = b_fit + s * (S @ excess)
     if not (np.all(a_fit > 0) and np.all(b_fit > 0)):
         return disc_domain(rb, R)
@@ -215,7 +220,7 @@ def _fitted_domain(table, ext, degree: int) -> FieldDomain:
     gauge = np.array([float(np.sqrt(((e[4][:, 0] - c) / a) ** 2 + (e[4][:, 1] / b) ** 2).max())
                       for e, c, a, b in zip(ext, c_fit, a_fit, b_fit)])
     Sl = S[:, :3]
-    lift = _upper_fit(Sl, gauge)
+    lift = upper_fit(Sl, gauge)
     L = Sl @ lift
     if not np.all(L > 0):
         return disc_domain(rb, R)

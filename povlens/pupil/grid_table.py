@@ -214,6 +214,15 @@ class GridPupilTable(SamplerMeasurements):
         return np.einsum("np,npk->nk", w, self.rho.reshape(-1, self.n_angles)[nodes])
 
     # -- the regions
+    def frame_at(self, film_xy):
+        """The interpolated description at film points (n, 2), in the frame of their
+        quadrant (f_x, f_y >= 0; mirror the plane points by the film point's signs):
+        (centre (n, 2), scale (n, 2), rho (n, N) at the angles t_k = 2 pi k / N, inside
+        (n,)).  Dark cells and points outside the table have inside False."""
+        cell, w, nodes, inside, _ = self._locate(film_xy)
+        c, s = self._frame(w, nodes)
+        return c, s, self._rho_interp(w, nodes), inside
+
     def area_at(self, film_xy) -> np.ndarray:
         """(n,) area (mm^2) of the sampled region at film points (n, 2); 0 where dark
         or outside the table."""

@@ -50,6 +50,13 @@ E is 0.
 
 Accuracy and cost are measured in docs/decisions/planning.md ("Relative
 illumination map").
+
+A lens without rotational symmetry (an anamorphic lens, whose table is a
+:class:`povlens.pupil.grid_table.GridPupilTable`) has its illumination over the film's x
+and y instead (:mod:`povlens.pupil.grid_illumination`): :func:`illumination_profile`,
+:func:`profile_record`, :func:`profile_from_record` and :func:`relative_illumination_map`
+take and give its :class:`~povlens.pupil.grid_illumination.IlluminationGrid` in place of
+the profile, so their callers need not know which.
 """
 
 from __future__ import annotations
@@ -60,6 +67,8 @@ import math
 import numpy as np
 
 from povlens.errors import OpticsError
+from povlens.pupil.grid_illumination import (IlluminationGrid, grid_from_record, grid_record,
+                                             illumination_grid)
 from povlens.pupil.prober import PupilProber
 from povlens.pupil.monte_carlo import irradiance_factor
 
@@ -149,9 +158,16 @@ def _table_key(table) -> dict:
             "film_half_diagonal_mm": float(table.film_half_diagonal_mm)}
 
 
+def _is_grid(table) -> bool:
+    return getattr(table, "kind", "radial") == "grid"
+
+
 def profile_record(profile: IlluminationProfile, table) -> dict:
     """JSON-able record of ``profile`` (:meth:`IlluminationProfile.to_dict`) with the
-    key of the ``table`` it was computed from, for :func:`profile_from_record`."""
+    key of the ``table`` it was computed from, for :func:`profile_from_record` (an
+    :class:`IlluminationGrid`'s: :func:`~povlens.pupil.grid_illumination.grid_record`)."""
+    if isinstance(profile, IlluminationGrid):
+        return grid_record(profile, table)
     return {**_table_key(table), **profile.to_dict()}
 
 
@@ -168,7 +184,9 @@ def profile_from_record(record, table) -> IlluminationProfile | None:
     """The profile of a :func:`profile_record` if it was made from ``table``'s lens,
     film distance and film and is well formed, else None.  Only the radii and the
     relative illumination come back (the widths and areas are 0: a map needs only
-    these)."""
+    these).  For a grid table, its :class:`IlluminationGrid` (or None) instead."""
+    if _is_grid(table):
+        return grid_from_record(record, table)
     if not isinstance(record, dict) or any(not _same(record.get(k), v)
                                            for k, v in _table_key(table).items()):
         return None
@@ -331,7 +349,13 @@ def illumination_profile(table, max_radius_mm: float | None = None, *,
     ------
     OpticsError
         When no ray from the film centre gets through (nothing to normalise by).
+
+    A grid table (an anamorphic lens) gives its
+    :class:`~povlens.pupil.grid_illumination.IlluminationGrid` over its whole extent
+    instead (``max_radius_mm``, ``n_grid`` and ``n_angles`` do not apply).
     """
+    if _is_grid(table):
+        return illumination_grid(table)
     r0 = film_radius_grid_mm(table, max_radius_mm, n_grid)
     lens, zp = table.lens, table.plane_z_mm
     cut = table.vignetted_beyond_mm
@@ -444,6 +468,13 @@ def relative_illumination_map(source, film_width_mm: float, film_height_mm: floa
         raise ValueError(f"film {film_width_mm!r} x {film_height_mm!r} mm: must be positive")
     if W < 1 or H < 1:
         raise ValueError(f"image {width_px} x {height_px} pixels: must be at least 1 x 1")
+    if _is_grid(source):
+        source = illumination_grid(source)
+    if isinstance(source, IlluminationGrid):     # over x and y; bilinear, so a pixel's mean
+        cols = (np.arange(W) + 0.5) / W - 0.5    # is its centre's value within a cell
+        rows = 0.5 - (np.arange(H) + 0.5) / H
+        return np.maximum(source.at_xy(cols[None, :] * w_mm + sx, rows[:, None] * h_mm + sy),
+                          0.0)
     profile = source if isinstance(source, IlluminationProfile) else illumination_profile(
         source, math.hypot(0.5 * w_mm + abs(sx), 0.5 * h_mm + abs(sy)))
     r = _pixel_radii(w_mm, h_mm, W, H, (sx, sy))

@@ -31,6 +31,7 @@ from povlens.pov.field_mesh import (build_field_meshes, combine_meshes, deinterl
 from povlens.pupil.field import (PupilMap, concentric_disc_mm, field_sample_points, field_weight,
                                  tile_points, trace_field)
 from povlens.pupil.field_domain import FieldDomain, disc_domain
+from povlens.pupil.grid_field_domain import domain_from_dict
 from povlens.pupil.field_mask import field_transmission, pass_masks
 from povlens.pupil.rays import ScenePlacement
 from povlens.rendering.vignetting import mesh_illumination_map
@@ -53,11 +54,12 @@ def _points(n: int, seed: int, jitter: bool) -> np.ndarray:
 
 
 def field_domain_of(plan: Plan) -> FieldDomain:
-    """The plan's pupil domain (the bounding disc for plans made before domains)."""
+    """The plan's pupil domain (the bounding disc for plans made before domains; the
+    ellipses over x and y of an anamorphic lens, :mod:`povlens.pupil.grid_field_domain`)."""
     fm = plan.field_mesh
     if fm.domain is None:
         return disc_domain(fm.pupil_disc_radius_mm, plan.film.max_field_radius_mm)
-    return FieldDomain.from_dict(fm.domain)
+    return domain_from_dict(fm.domain)
 
 
 @dataclasses.dataclass(frozen=True)
