@@ -134,8 +134,8 @@ def edited(tmp_path, old, new, name="edited.zmx"):
 
 
 @pytest.mark.parametrize("old,new,match", [
-    ("TYPE STANDARD\n  FIMP \n  CURV 0.0501", "TYPE TOROIDAL\n  FIMP \n  CURV 0.0501",
-     r"surface 1 \(line \d+\): surface type TOROIDAL"),
+    ("TYPE STANDARD\n  FIMP \n  CURV 0.0501", "TYPE BICONICX\n  FIMP \n  CURV 0.0501",
+     r"surface 1 \(line \d+\): surface type BICONICX"),
     ("SURF 2\n  TYPE STANDARD", "SURF 2\n  TYPE COORDBRK", r"surface 2 .*coordinate break"),
     ("  DISZ 7\n", "  DISZ 7\n  CONI -1\n", r"surface 1 .*the stop lies on an aspheric face"),
     ("  DISZ 7\n", "  DISZ 7\n  SCBD 1 0 0 0 0.5 0 0 0\n", r"surface 1 .*tilted or decentered"),
