@@ -27,8 +27,9 @@ Conversion to a Kolb/pbrt file (all lengths to mm):
   a catalogue name with the nd and vd the line gives; a 6-digit glass code
   (``517642`` -> nd 1.517, vd 64.2); ``glasses`` (name -> (nd, vd)) overrides all.
   A catalogue glass whose line holds Zemax's placeholder (nd 1.5, vd 40), or nd 0 (as
-  Thorlabs' files do), has no index in the file: nd and vd come from the glass catalogue (:mod:`povlens.lens.glass_catalog`,
-  SCHOTT, OHARA, HOYA, CDGM, HIKARI, SUMITA); a name no catalogue holds is refused,
+  Thorlabs' files do), has no index in the file: nd and vd come from the glass
+  catalogue (:mod:`povlens.lens.glass_catalog`, SCHOTT, OHARA, HOYA, CDGM, HIKARI,
+  SUMITA); a name no catalogue holds is refused,
   naming the closest, unless ``glasses`` gives it.  A row whose glass the catalogue
   holds (and whose nd, vd match it) is written with ``#!glass MAKER:NAME``, which gives
   ``--dispersion`` the catalogue formula;

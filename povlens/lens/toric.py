@@ -306,7 +306,8 @@ def parse_directive(comment: str, where: str) -> float:
     usage = ("write '#!toric rx=R' with R the radius (mm) of the x-z section, 0 for "
              "flat in x; the row's radius column is its y-z section")
     if len(body) != 1:
-        raise ValueError(f"{where}{'nothing' if not body else ' '.join(body)!r} given; {usage}")
+        shown = "nothing" if not body else repr(" ".join(body))
+        raise ValueError(f"{where}{shown} given; {usage}")
     name, eq, value = body[0].partition("=")
     if name.strip().lower() != "rx" or not eq:
         raise ValueError(f"{where}'{body[0]}' is not rx=<radius>; {usage}")
