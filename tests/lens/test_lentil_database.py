@@ -16,7 +16,7 @@ from import_reference import has_power, lentil_system, reference
 from povlens.errors import OpticsError
 from povlens.lens.import_common import LensImportWarning
 from povlens.lens.import_lentil import import_lentil
-from povlens.lens.paraxial import anamorphic_data, paraxial_data
+from povlens.lens.paraxial import anamorphic_data, paraxial_data, primary_meridian
 from povlens.lens.prescription import read_lens
 
 DATABASE = ROOT / "tests" / "data" / "lentil-lenses.json"
@@ -80,6 +80,7 @@ def test_a_lens_without_power_in_y_loads_with_a_warning():
     a = anamorphic_data(lens)
     assert a.afocal == "y" and a.efl_y_mm == math.inf and a.squeeze == math.inf
     assert a.f_number_y == math.inf and math.isfinite(a.efl_x_mm) and a.efl_x_mm > 0
+    assert primary_meridian(lens) == "x"          # its main first-order data are x's
 
 
 def test_a_design_without_an_iris_takes_the_surface_limiting_the_axial_beam():

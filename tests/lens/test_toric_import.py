@@ -166,3 +166,19 @@ def test_a_toroid_with_equal_radii_and_no_terms_is_a_sphere(tmp_path):
     sphere_only = quiet(write_toroidal(tmp_path, unit="MM", rot1=60.0, k=0.0, a4=0.0,
                                        rot2=-200.0)).lens
     assert not sphere_only.is_anamorphic and sphere_only.radius_x_mm is None
+
+
+def test_inspect_shows_toric_rows_and_both_meridians(tmp_path):
+    from povlens.cli.inspect_cmd import inspect_dict
+    lens = quiet(write_toroidal(tmp_path)).lens
+    d = inspect_dict(lens)
+    assert [r["kind"] for r in d["surface_rows"]][:3] == ["toroid", "toroid", "aperture"]
+    assert d["surface_rows"][0]["radius_x"] == pytest.approx(-40.0)
+    a = d["anamorphic"]
+    assert a["efl_x_mm"] == pytest.approx(paraxial_data(lens, "x").efl)
+    assert a["efl_y_mm"] == pytest.approx(d["efl"]) and d["meridian"] == "y"
+    assert any(n.startswith("anamorphic: squeeze EFL_y / EFL_x = ") for n in d["notes"])
+    cylinder = quiet(LJ1598).lens                  # power in y only: afocal in x
+    d = inspect_dict(cylinder)
+    assert d["anamorphic"]["efl_x_mm"] is None and d["anamorphic"]["afocal"] == "x"
+    assert any("afocal in x" in n for n in d["notes"])
