@@ -40,7 +40,7 @@ import time
 import numpy as np
 
 from povlens.errors import UsageError
-from povlens.lens.asphere import sag_range_mm
+from povlens.lens.toric import row_sag_range_mm
 from povlens.lens.prescription import LensPrescription
 from povlens.pupil.sampler_interface import (LensSample, SamplerMeasurements,
                                              check_sample_arguments, finish_sample,
@@ -272,7 +272,7 @@ class NaiveRearElement(SamplerMeasurements):
         t0 = time.perf_counter()
         F = float(film_distance_mm)
         R = float(lens.aperture_radius_mm[-1])
-        s_lo, s_hi = sag_range_mm(lens, lens.n_surfaces - 1, R)    # sphere or asphere
+        s_lo, s_hi = row_sag_range_mm(lens, lens.n_surfaces - 1, R)  # sphere, asphere, toric
         radius = R
         for qz in (F - s_lo, F - s_hi):  # the z span of the rear surface over its aperture
             if qz > 0:

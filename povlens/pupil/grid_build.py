@@ -16,7 +16,7 @@ Phases
    region (centre to the middle of its chords along x and y through the old centre,
    s_x and s_y to their half-lengths) and traced again while it moves by more than
    :data:`povlens.pupil.build.RENORMALISE`.  N starts at 32 and doubles (up to
-   :data:`MAX_ANGLES`) until the chords leave at most ``tolerance / 4`` of area error at
+   :data:`MAX_ANGLES`) until the chords leave at most ``tolerance / 2`` of area error at
    the initial nodes.  Nodes where no ray passes are *dark*: they take the region of the
    nearest lit node, so that the interpolation next to them stays a superset.
 2. **Refinement.**  The grid starts with :data:`INITIAL_KNOTS` evenly spaced knots per
@@ -93,6 +93,8 @@ class _Node:
 def check_extent(film_extent_mm) -> tuple[float, float]:
     """(X, Y) as floats; ParameterError unless both are positive and finite (mm)."""
     try:
+        if isinstance(film_extent_mm, (str, bytes)):
+            raise TypeError
         X, Y = (float(v) for v in film_extent_mm)
     except (TypeError, ValueError):
         raise ParameterError("film_extent_mm", film_extent_mm,
@@ -269,7 +271,7 @@ def area_error(exact: np.ndarray, approx: np.ndarray) -> float:
 
 def _initial_nodes(tracer: _Tracer, kx, ky, tolerance: float, n_angles):
     """N and the initial grid's nodes: N doubled from 32 until the chords' area error at
-    the lit nodes is at most tolerance / 4 (or ``n_angles``).  Returns (N, {(x, y):
+    the lit nodes is at most tolerance / 2 (or ``n_angles``).  Returns (N, {(x, y):
     _Node}, the chords' largest area error)."""
     pts = np.array([(x, y) for x in kx for y in ky], dtype=np.float64)
     choices = [int(n_angles)] if n_angles else [32, 64, 128, MAX_ANGLES]
@@ -278,7 +280,7 @@ def _initial_nodes(tracer: _Tracer, kx, ky, tolerance: float, n_angles):
         found = tracer.regions(pts, N, frames)
         lit = [n for n in found if n.lit]
         err = max((area_error(n.rho, chord_extent(n.rho[0::2])) for n in lit), default=0.0)
-        if err <= 0.25 * tolerance or not lit:
+        if err <= 0.5 * tolerance or not lit:
             break
         frames = (np.array([n.c if n.lit else [0.0, 0.0] for n in found]),
                   np.array([n.s if n.lit else [1.0, 1.0] for n in found]))

@@ -19,9 +19,10 @@ mirrored.  P is uniform on the ellipse when q is uniform on the disc, with densi
 ellipse holds the table's (conservative) region.
 
 Fit.  At a grid of film points over the quadrant (:data:`FIT_POINTS` per axis) the
-table's polygons give a centre (the middle of their box) and a shape.  The centres are fitted by least
-squares (weighted by the regions' areas), the shapes (the polygon's box along its principal
-axes, scaled to hold it: the smallest ellipse of those proportions) entries by asymmetric least squares
+table's polygons give a centre and a shape.  The centres are fitted by least
+squares (weighted by the regions' areas) to the centres of the polygons' smallest-area
+ellipses (Khachiyan's algorithm, :func:`min_area_ellipses`), the shapes (those ellipses
+about the fitted centre, scaled to hold the polygon) entries by asymmetric least squares
 from above (:func:`povlens.pupil.field_domain.upper_fit`); then each polygon's largest
 gauge |A^-1 (v - c)| in its fitted ellipse is bounded from above by a smooth L(s) of degree
 1, and A is scaled by L, by the largest ratio left and by
@@ -43,6 +44,7 @@ from povlens.pupil.field_domain import (DOMAIN_MARGIN, SATURATION, FieldDomain, 
                                         field_domain, saturate, upper_fit)
 
 __all__ = ["GridFieldDomain", "grid_field_domain", "grid_bounding_disc_radius_mm",
+           "min_area_ellipses",
            "field_domain_for", "bounding_disc_for", "domain_from_dict", "FIT_DEGREE",
            "FIT_POINTS", "CHECK_POINTS"]
 
@@ -53,6 +55,8 @@ FIT_POINTS = 13
 CHECK_POINTS = 41
 #: Relative margin of the bounding disc.
 DISC_MARGIN = 2e-3
+#: Steps of Khachiyan's algorithm for each polygon's smallest-area ellipse.
+MVEE_ITERATIONS = 150
 
 
 def _basis(sx: np.ndarray, sy: np.ndarray, degree: int) -> np.ndarray:
@@ -155,20 +159,41 @@ def grid_bounding_disc_radius_mm(table) -> float:
     return r * (1.0 + DISC_MARGIN)
 
 
+def min_area_ellipses(V: np.ndarray, iterations: int = MVEE_ITERATIONS):
+    """The smallest-area ellipses holding point sets V (m, k, 2), by Khachiyan's algorithm
+    (all sets at once, a fixed number of steps): (centres (m, 2), shape matrices (m, 2, 2)
+    S with the ellipse {c + S q : |q| <= 1}; near-minimal, not yet scaled to hold every
+    point exactly)."""
+    m, k, d = V.shape[0], V.shape[1], 2
+    Q = np.concatenate([V, np.ones((m, k, 1))], axis=2)             # (m, k, 3)
+    u = np.full((m, k), 1.0 / k)
+    rows = np.arange(m)
+    for _ in range(int(iterations)):
+        Xm = np.einsum("mki,mk,mkj->mij", Q, u, Q)
+        M = np.einsum("mki,mki->mk", Q, np.linalg.solve(Xm, Q.transpose(0, 2, 1))
+                      .transpose(0, 2, 1))
+        j = np.argmax(M, axis=1)
+        Mj = M[rows, j]
+        step = (Mj - d - 1.0) / ((d + 1.0) * np.maximum(Mj - 1.0, 1e-300))
+        u *= (1.0 - step)[:, None]
+        u[rows, j] += step
+    c = np.einsum("mk,mki->mi", u, V)
+    cov = np.einsum("mk,mki,mkj->mij", u, V, V) - np.einsum("mi,mj->mij", c, c)
+    val, vec = np.linalg.eigh(d * cov)
+    S = np.einsum("mij,mj,mkj->mik", vec, np.sqrt(np.maximum(val, 1e-300)), vec)
+    return c, S
+
+
 def _shapes(f, V, area, X, Y, degree):
     """The fitted centre coefficients and, per point, the shape A_i (m, 2, 2) holding its
-    polygon about the fitted centre."""
+    polygon about the fitted centre: its smallest-area ellipse's, scaled to hold it."""
     B = _basis((f[:, 0] / X) ** 2, (f[:, 1] / Y) ** 2, degree)
     w = np.sqrt(np.maximum(area, 0.0) / max(float(area.max()), 1e-300))
-    box_c = 0.5 * (V.min(axis=1) + V.max(axis=1))
-    cx = np.linalg.lstsq(w[:, None] * f[:, :1] * B, w * box_c[:, 0], rcond=None)[0]
-    cy = np.linalg.lstsq(w[:, None] * f[:, 1:] * B, w * box_c[:, 1], rcond=None)[0]
+    mc, S = min_area_ellipses(V)
+    cx = np.linalg.lstsq(w[:, None] * f[:, :1] * B, w * mc[:, 0], rcond=None)[0]
+    cy = np.linalg.lstsq(w[:, None] * f[:, 1:] * B, w * mc[:, 1], rcond=None)[0]
     c = np.stack([f[:, 0] * (B @ cx), f[:, 1] * (B @ cy)], 1)
     d = V - c[:, None, :]
-    cov = np.einsum("nki,nkj->nij", d, d) / d.shape[1]
-    _, vec = np.linalg.eigh(cov)                      # the region's principal axes
-    half = np.abs(np.einsum("nki,nij->nkj", d, vec)).max(axis=1)     # its box along them
-    S = np.einsum("nij,nj,nkj->nik", vec, np.maximum(half, 1e-300), vec)
     g = np.linalg.norm(np.linalg.solve(S[:, None], d[..., None])[..., 0], axis=-1).max(axis=1)
     return B, cx, cy, S * g[:, None, None]
 

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from povlens.lens.asphere import sag_range_mm
+from povlens.lens.toric import row_sag_range_mm
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_film
 from povlens.pupil.prober import BISECTION_RELATIVE, MAX_BISECTION_STEPS, RADIAL_SAMPLES, TRACE_CHUNK
@@ -34,19 +34,10 @@ __all__ = ["GridProber", "rear_sag_range_mm"]
 
 
 def rear_sag_range_mm(lens: LensPrescription, r_max_mm: float) -> tuple[float, float]:
-    """(min, max) sag (mm) of the rear surface over radii 0..``r_max_mm``, in both
-    meridians: the y-z profile (sphere or asphere, :func:`povlens.lens.asphere.sag_range_mm`)
-    and, for a toric or cylindrical rear surface, the x-z circle of radius
-    ``lens.radius_x_mm[-1]`` (0: flat in x).  A saddle's sag lies between the two."""
-    i = lens.n_surfaces - 1
-    lo, hi = sag_range_mm(lens, i, r_max_mm)
-    rx = getattr(lens, "radius_x_mm", None)
-    if rx is not None and float(rx[i]) != 0.0:
-        R = float(rx[i])
-        r = min(float(r_max_mm), abs(R))
-        s = (r * r / R) / (1.0 + math.sqrt(max(0.0, 1.0 - (r / R) ** 2)))
-        lo, hi = min(lo, s, 0.0), max(hi, s, 0.0)
-    return lo, hi
+    """(min, max) sag (mm) of the rear surface over the disc of radius ``r_max_mm``: a
+    sphere's or asphere's, or a toric row's over both meridians and the rim
+    (:func:`povlens.lens.toric.row_sag_range_mm`)."""
+    return row_sag_range_mm(lens, lens.n_surfaces - 1, r_max_mm)
 
 
 class GridProber:
