@@ -105,7 +105,9 @@ def paraxial_curvature_per_mm(lens) -> np.ndarray:
 
 
 def row_sag(lens, i: int):
-    """Function r_mm -> sag (mm) of row ``i`` (sphere or asphere), for any shape of r."""
+    """Function r_mm -> sag (mm) of row ``i`` (sphere or asphere), for any shape of r.
+    (Of a toric row: its y-z profile; :func:`povlens.lens.toric.row_sag_xy` is the
+    surface.)"""
     c = float(lens.curvature_per_mm[i])
     if not aspheric_rows(lens)[i]:
         def sphere(r_mm):
@@ -119,7 +121,8 @@ def row_sag(lens, i: int):
 def sag_range_mm(lens, i: int, r_max_mm: float, n: int = 257) -> tuple[float, float]:
     """(min, max) sag (mm) of row ``i`` over radii 0..``r_max_mm``: the sag at the rim
     and 0 for a sphere; sampled on ``n`` radii for an asphere, whose sag need not be
-    monotonic (widened by 1e-9 of its span plus 1e-12 mm)."""
+    monotonic (widened by 1e-9 of its span plus 1e-12 mm).  (Of a toric row: its y-z
+    profile's; :func:`povlens.lens.toric.row_sag_range_mm` takes any row.)"""
     sag = row_sag(lens, i)
     if not aspheric_rows(lens)[i]:
         s = float(sag(float(r_max_mm)))

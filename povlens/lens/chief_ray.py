@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from povlens.lens.paraxial import paraxial_data
+from povlens.lens.paraxial import anamorphic_data, paraxial_data, primary_meridian
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import TraceResult, trace_from_film
 
@@ -28,7 +28,8 @@ def chief_ray_aim_mm(lens: LensPrescription, film_distance_mm: float, film_radiu
 
     Parameters
     ----------
-    lens : the lens; its stop is the paraxial stop (:func:`paraxial_data`).
+    lens : the lens; its stop is the paraxial stop (:func:`paraxial_data`; of an
+        anamorphic lens the x-z meridian's, in which these chief rays lie).
     film_distance_mm : rear vertex to film, mm.
     film_radius_mm : (n,) film radii r, mm (a scalar is one radius).
     iterations : most secant steps.
@@ -38,7 +39,7 @@ def chief_ray_aim_mm(lens: LensPrescription, film_distance_mm: float, film_radiu
     x_rear : (n,) x of the aim on the rear-vertex plane, mm.
     found : (n,) bool, True where the stop height converged to within 1e-9 mm.
     """
-    p = paraxial_data(lens)
+    p = paraxial_data(lens, _film_x_meridian(lens))
     s = p.stop_index
     r = np.atleast_1d(np.asarray(film_radius_mm, dtype=np.float64)).ravel()
     n = r.size
@@ -69,6 +70,15 @@ def chief_ray_aim_mm(lens: LensPrescription, film_distance_mm: float, film_radiu
         if np.all(~ok1 | (np.abs(h1) < 1e-12)):
             break
     return x1, ok1 & (np.abs(h1) < 1e-9)
+
+
+def _film_x_meridian(lens: LensPrescription) -> str:
+    """The meridian of chief rays from film points (r, 0, 0): the x-z plane's on an
+    anamorphic lens with power there, else the lens's primary one ("y": the same data
+    on a rotationally symmetric lens)."""
+    if lens.is_anamorphic and anamorphic_data(lens).afocal != "x":
+        return "x"
+    return primary_meridian(lens)
 
 
 def chief_rays(lens: LensPrescription, film_distance_mm: float,
