@@ -40,4 +40,9 @@ def run(args) -> int:
     print(f"  film distance, real rays:   {r.exact_film_distance_mm:10.4f} mm  "
           f"(RMS spot {1000 * r.exact_rms_spot_mm:.2f} um)")
     print(f"  closest focus distance:     {r.closest_focus_mm:10.4f} mm")
+    if r.astigmatic_foci_mm is not None:       # anamorphic: the thick lens is the medial
+        for m in ("x", "y"):
+            f = r.astigmatic_foci_mm[m]
+            shown = f"{f:10.4f} mm" if math.isfinite(f) else "      none (no power there)"
+            print(f"  paraxial focus in {m}:        {shown}")
     return 0
