@@ -9,7 +9,7 @@ from povlens.api import import_lens
 from povlens.errors import UsageError
 from povlens.lens.importers import ZEMAX, source_format
 from povlens.lens.import_lentil import list_lentil
-from povlens.lens.paraxial import paraxial_data
+from povlens.lens.paraxial import anamorphic_data, paraxial_data, primary_meridian
 from povlens.cli.common import positive_float, print_json
 
 
@@ -81,9 +81,15 @@ def run(args) -> int:
                          "or --list to see the entries of a lentil database")
     lens = import_lens(args.source, args.output, lens_id=args.lens_id, efl_mm=args.efl,
                        adjusted=args.adjusted, glasses=dict(args.glass) or None)
-    p = paraxial_data(lens)
+    p = paraxial_data(lens, primary_meridian(lens))
     title = lens.comments[0] if lens.comments else args.source
     print(f"wrote {args.output}: {title}")
     print(f"  {lens.n_surfaces} rows, EFL {p.efl:.4f} mm, F/{p.f_number:.3f}, "
           f"stop diameter {p.stop_diameter:.4f} mm, total track {p.total_track:.4f} mm")
+    if lens.is_anamorphic:
+        a = anamorphic_data(lens)
+        efl = {m: f"{v:.4f} mm" if math.isfinite(v) else "none (afocal)"
+               for m, v in (("x", a.efl_x_mm), ("y", a.efl_y_mm))}
+        print(f"  anamorphic: EFL_x {efl['x']}, EFL_y {efl['y']}, squeeze EFL_y/EFL_x "
+              f"{a.squeeze:.4f}")
     return 0

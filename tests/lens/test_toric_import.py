@@ -182,3 +182,22 @@ def test_inspect_shows_toric_rows_and_both_meridians(tmp_path):
     d = inspect_dict(cylinder)
     assert d["anamorphic"]["efl_x_mm"] is None and d["anamorphic"]["afocal"] == "x"
     assert any("afocal in x" in n for n in d["notes"])
+
+
+def test_scaling_an_anamorphic_design_scales_both_sections(tmp_path):
+    """--efl scales the primary meridian's focal length (y; x for a lens without power
+    in y); the x-z radii scale with everything else, so the squeeze stays."""
+    from povlens.lens.import_lentil import import_lentil
+    db = ROOT / "tests" / "data" / "lentil-lenses.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        schneider, test_lens = import_lentil(db, "2004"), import_lentil(db, "9991")
+    scaled = schneider.scaled_to_efl(50.0)
+    back = scaled.write(tmp_path / "s.dat")
+    a0, a1 = anamorphic_data(schneider.lens), anamorphic_data(back)
+    assert a1.efl_y_mm == pytest.approx(50.0, rel=1e-12)
+    assert a1.squeeze == pytest.approx(a0.squeeze, rel=1e-12)
+    k = 50.0 / a0.efl_y_mm
+    assert back.radius_x_mm == pytest.approx(schneider.lens.radius_x_mm * k, rel=1e-15)
+    x_only = test_lens.scaled_to_efl(50.0).lens
+    assert anamorphic_data(x_only).efl_x_mm == pytest.approx(50.0, rel=1e-12)
