@@ -32,7 +32,7 @@ import numpy as np
 
 from povlens.lens.chief_ray import chief_rays
 from povlens.lens.glass_catalog import find_glass
-from povlens.lens.paraxial import image_of_object, paraxial_data
+from povlens.lens.paraxial import image_of_object, paraxial_data, primary_meridian
 from povlens.lens.prescription import AIR, LensPrescription
 from povlens.lens.tracer import trace_from_film
 
@@ -214,7 +214,7 @@ def chromatic_aberration(lens: LensPrescription, film_distance_mm: float,
     z = {name: image_of_object(lens_at_wavelength(lens, lam), front)[0]
          for name, lam in (("F", LINE_F_NM), ("C", LINE_C_NM))}
     shift = z["F"] - z["C"] if math.isfinite(z["F"]) and math.isfinite(z["C"]) else math.nan
-    n_f = paraxial_data(lens).f_number
+    n_f = paraxial_data(lens, primary_meridian(lens)).f_number   # y unless afocal there
     finite = np.isfinite(lateral_px)
     return {
         "lines_nm": {"F": LINE_F_NM, "d": LINE_D_NM, "C": LINE_C_NM},

@@ -31,7 +31,7 @@ import numpy as np
 
 from povlens.errors import OpticsError, ParameterError
 from povlens.lens.paraxial import (MERIDIANS, ParaxialData, entrance_pupil, paraxial_data,
-                                   primary_meridian)
+                                   primary_meridian, system_matrix)
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_scene
 from povlens.util.minimize import bounded_minimum  # scipy's, without its 0.5 s import
@@ -61,7 +61,11 @@ def _hiatus_terms(p: ParaxialData) -> float:
 
 
 def closest_focus_distance_mm(lens: LensPrescription, p: ParaxialData | None = None) -> float:
-    """Closest object distance (from the film) the thick-lens model can focus: L = 4 f."""
+    """Closest object distance (from the film) the thick-lens model can focus: L = 4 f.
+    (Without ``p``, an anamorphic lens's: the larger of its meridians' with power.)"""
+    if p is None and lens.is_anamorphic:
+        return max(closest_focus_distance_mm(lens, paraxial_data(lens, m))
+                   for m in MERIDIANS if system_matrix(lens, meridian=m)[1, 0] != 0.0)
     p = p or paraxial_data(lens)
     return 4.0 * p.efl + p.total_track - _hiatus_terms(p)
 
@@ -69,7 +73,10 @@ def closest_focus_distance_mm(lens: LensPrescription, p: ParaxialData | None = N
 def thick_lens_film_distance_mm(lens: LensPrescription, distance_mm: float,
                                 p: ParaxialData | None = None) -> float:
     """Film distance (rear vertex to film, mm) focusing an object ``distance_mm``
-    from the film, by the thick-lens equation.  inf focuses at infinity."""
+    from the film, by the thick-lens equation.  inf focuses at infinity.  (Without ``p``,
+    an anamorphic lens's medial focus: the mean of :func:`astigmatic_foci_mm`.)"""
+    if p is None and lens.is_anamorphic:
+        return _medial_mm(astigmatic_foci_mm(lens, distance_mm))
     p = p or paraxial_data(lens)
     if math.isinf(distance_mm):
         return p.bfl
@@ -313,8 +320,7 @@ def _anamorphic_focus(lens: LensPrescription, distance_mm: float) -> FocusResult
     p = paraxial_data(lens, primary_meridian(lens))
     thick = _medial_mm(foci)
     exact, spot = exact_film_distance_mm(lens, distance_mm, p, thick)
-    closest = max(closest_focus_distance_mm(lens, paraxial_data(lens, m))
-                  for m, f in foci.items() if math.isfinite(f))
+    closest = closest_focus_distance_mm(lens)
     return FocusResult(distance_mm, float(thick), float(exact), float(spot),
                        float(rms_spot_mm(lens, thick, distance_mm, p)[0]), float(closest),
                        {k: float(v) for k, v in foci.items()})
