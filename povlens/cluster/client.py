@@ -47,6 +47,7 @@ from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_
 from povlens.rendering.groups import (UnitSums, choose_group_size, chunk_groups, render_units,
                                       unit_terms, write_group)
 from povlens.rendering.mesh_samples import mark_batches_done
+from povlens.rendering.photon_map import photon_map_for
 from povlens.rendering.radiosity_cache import radiosity_cache_for
 from povlens.util.files import write_bytes, write_text
 
@@ -358,6 +359,7 @@ def _job(outdir: Path, plan, shared_dir: bool) -> dict:
     """What every task gets: the render folder, the bundle's key and bytes (None when
     the workers see the folder: ``shared_dir``)."""
     radiosity_cache_for(plan, outdir)   # made here once, it travels with the bundle
+    photon_map_for(plan, outdir)        # so does the photon map
     if shared_dir:
         return {"outdir": str(outdir), "key": f"shared-{uuid.uuid4().hex}",
                 "bundle": None, "shared": True}

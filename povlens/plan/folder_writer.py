@@ -28,7 +28,7 @@ from pathlib import Path
 from povlens.errors import PovlensError
 from povlens.plan.render_folder import VIEWS, RenderFolder
 from povlens.plan.schema import FocalBlurSettings, Plan, read_plan, write_plan
-from povlens.pov.mesh import SINK_RADIUS, focal_blur_wrapper, pinhole_wrapper
+from povlens.pov.mesh import SINK_RADIUS, focal_blur_wrapper, photon_map_block, pinhole_wrapper
 from povlens.pov.povray_paths import include_text
 from povlens.pov.sdl import pov_string, pov_vector, read_template
 from povlens.util.files import write_text
@@ -89,12 +89,15 @@ def _batch_wrapper(plan: Plan, outdir: Path) -> str:
     """Animation wrapper (templates/mesh_batch.pov.tmpl): frame k renders sample k."""
     scene = _scene_include(plan, outdir, RenderFolder(outdir).samples)
     names = RenderFolder.mesh_include_names()
+    ph = RenderFolder.photon_map_names()
+    photons = photon_map_block(plan.povray.photon_settings, "load_file", ph["load"],
+                               ph["load_flag"])
     if plan.field_mesh is not None:
         return read_template("field_batch.pov.tmpl").substitute(
-            names, scene_include=pov_string(scene))
+            names, scene_include=pov_string(scene), photons=photons)
     return read_template("mesh_batch.pov.tmpl").substitute(
         names, scene_include=pov_string(scene), sink_centre=pov_vector(plan.sink_centre),
-        sink_radius=f"{SINK_RADIUS:.9g}")
+        sink_radius=f"{SINK_RADIUS:.9g}", photons=photons)
 
 
 def _makefile(plan: Plan) -> str:
@@ -161,8 +164,11 @@ def write_folder(outdir: Path, plan: Plan) -> None:
                             or _sample_layout(old) != _sample_layout(plan)):
         invalidate_outputs(outdir, stale_samples(old, plan))
     cam = plan.povray_camera
+    ph = RenderFolder.photon_map_names()
     write_if_changed(folder.wrapper("pinhole"), pinhole_wrapper(
-        _scene_include(plan, outdir), cam.location, cam.direction, cam.right, cam.up))
+        _scene_include(plan, outdir), cam.location, cam.direction, cam.right, cam.up,
+        photons=photon_map_block(plan.povray.photon_settings, "save_file", ph["save"],
+                                 ph["save_flag"])))
     write_if_changed(folder.wrapper("focal-blur"), focal_blur_text(plan, outdir))
     if plan.inputs.method == "mesh":
         folder.samples.mkdir(exist_ok=True)

@@ -192,6 +192,7 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReus
     apply_dispersion(opts, plan, lens, table)    # --dispersion: colour numbers, wider disc
     apply_aperture_shape(opts, plan, lens, table)  # iris/mask: notes, the iris's pupil domain
     _radiosity_cache(opts, plan, st)
+    _photon_map(opts, plan, st)
     return plan, table
 
 
@@ -217,6 +218,27 @@ def _radiosity_cache(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:
         return
     plan.povray = dataclasses.replace(plan.povray, radiosity_cache=True)
     plan.add_note(RADIOSITY_CACHE_NOTE)
+
+
+#: What a mesh plan of a scene with photons says it adds.
+PHOTON_MAP_NOTE = (
+    "photons: they are shot once, by a small pinhole render that saves the photon map "
+    "(a global_settings photons block repeating the scene's own items with save_file), and "
+    "every lens sample loads it (the same items with load_file) instead of shooting again")
+
+
+def _photon_map(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:
+    """Mark a mesh plan of a scene with photons for the shared photon map
+    (:mod:`povlens.rendering.photon_map`) when its photons block can be repeated."""
+    if opts.sampling.method != "mesh" or "photons" not in st.scene_settings:
+        return
+    if not st.scene_photons:
+        plan.add_note("photons: povlens cannot repeat the scene's photons block whole (a "
+                      "macro, a name it cannot evaluate, or the scene's own save_file or "
+                      "load_file), so each lens sample shoots its own photons")
+        return
+    plan.povray = dataclasses.replace(plan.povray, photon_settings=st.scene_photons)
+    plan.add_note(PHOTON_MAP_NOTE)
 
 
 def check_shift_sees_light(film: Film, table, lens_name: str) -> None:

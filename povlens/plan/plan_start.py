@@ -83,6 +83,7 @@ class PlanStart:
     povray: PovrayOptions = PovrayOptions()  # the user's POV-Ray options, checked
     notes: list[str] = dataclasses.field(default_factory=list)  # Plan.notes of the camera
     scene_settings: tuple[str, ...] = ()   # the items of the scene's global_settings
+    scene_photons: str | None = None       # its photons block's items (SceneCamera)
 
 
 def start_plan(opts: ConvertOptions) -> PlanStart:
@@ -139,7 +140,8 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
     return PlanStart(mm_per_unit, lens, p, film, focus_mm, film_d, object_d, thick_d, spot,
                      model, loc, right, up, fwd, cam_source, camera, focus, focus_from,
                      povray, camera_notes(cam, proportions) + _framing(cam, film, model, opts),
-                     () if cam is None else tuple(cam.global_settings))
+                     () if cam is None else tuple(cam.global_settings),
+                     None if cam is None else cam.photon_settings)
 
 
 def _framing(cam, film, model, opts) -> list[str]:

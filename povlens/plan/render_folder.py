@@ -14,6 +14,8 @@ A render folder (``povlens convert -o OUTDIR``) holds
 ``illumination.json``                     the relative illumination of a field-mesh composite
 ``radiosity.rca``                         the radiosity samples every lens sample reads
 ``radiosity.json``                        whether the lens samples share them, and why
+``photons.ph``                            the photon map every lens sample loads
+``photons-N.tmp``                         that map while a pinhole render writes it
 ``image.exr``, ``image.png``              the image (linear float; sRGB preview)
 ``samples/batch_BBB.pov``                 the mesh method's batch wrappers
 ``samples/batch_BBB.done``                make's marker: batch b is rendered (its samples' files)
@@ -73,6 +75,8 @@ _PART = ".part"
 _TIMING = ".timing.json"
 _LOCK = ".lock"
 _SPECULATIVE = ".speculative-focal-blur"
+_PHOTON_MAP = "photons.ph"
+_PHOTON_PARTIAL = ("photons-", ".tmp")     # + the writing render's number
 
 
 def _sample_name(k: int, suffix: str) -> str:
@@ -174,6 +178,27 @@ class RenderFolder:
         """The radiosity samples of one pinhole pretrace, which every lens sample reads
         (:mod:`povlens.rendering.radiosity_cache`)."""
         return self.path / "radiosity.rca"
+
+    @property
+    def photon_map(self) -> Path:
+        """The photon map one pinhole render shoots and every lens sample loads
+        (:mod:`povlens.rendering.photon_map`)."""
+        return self.path / _PHOTON_MAP
+
+    def photon_map_partial(self, n: int) -> Path:
+        """Where render ``n`` writes the photon map before it is renamed into place
+        (:meth:`photon_map_names` spells it for the wrappers)."""
+        return self.path / f"{_PHOTON_PARTIAL[0]}{int(n)}{_PHOTON_PARTIAL[1]}"
+
+    @staticmethod
+    def photon_map_names() -> dict[str, str]:
+        """The photon map's names as SDL string expressions for the wrappers: ``save``
+        (in the folder, ``PovlensPhotonSave`` the number of :meth:`photon_map_partial`)
+        and ``load`` (from ``samples/``), and the flags that switch them on."""
+        return {"save": f'concat("{_PHOTON_PARTIAL[0]}", str(PovlensPhotonSave, 0, 0), '
+                        f'"{_PHOTON_PARTIAL[1]}")',
+                "load": f'"../{_PHOTON_MAP}"',
+                "save_flag": "PovlensPhotonSave", "load_flag": "PovlensPhotonLoad"}
 
     @property
     def radiosity_choice(self) -> Path:
@@ -394,7 +419,8 @@ class RenderFolder:
         if stale is None:
             patterns += [every + s for s in (_IMAGE, _BLOCKED, _MESH, _MASK)]
             patterns += [self.exposure_txt.name, self.illumination_json.name,
-                         self.radiosity_cache.name, self.radiosity_choice.name]
+                         self.radiosity_cache.name, self.radiosity_choice.name,
+                         self.photon_map.name]
         out = [f for pattern in patterns for f in self.path.glob(pattern)]
         for k in stale or []:
             out += [self.samples / _sample_name(k, s)
@@ -403,9 +429,9 @@ class RenderFolder:
 
     def worker_inputs(self) -> list[Path]:
         """The folder's files a lens sample's POV-Ray run reads: the plan, the pupil
-        table, the wrappers (the views' and the batches') and the radiosity samples
-        when there are."""
-        cache = [self.radiosity_cache] if self.radiosity_cache.is_file() else []
+        table, the wrappers (the views' and the batches'), and the radiosity samples and
+        the photon map when there are."""
+        cache = [f for f in (self.radiosity_cache, self.photon_map) if f.is_file()]
         return ([self.plan_json, self.pupil_npz] + sorted(self.path.glob("*.pov"))
                 + sorted(self.samples.glob("*.pov")) + cache)
 

@@ -264,6 +264,10 @@ class PovraySettings:
     #: The lens samples read the radiosity samples of one pinhole pretrace
     #: (``RenderFolder.radiosity_cache``; :mod:`povlens.rendering.radiosity_cache`).
     radiosity_cache: bool = False
+    #: The scene's photons settings as SDL text ("" none): the lens samples load one
+    #: photon map shot with them (``RenderFolder.photon_map``;
+    #: :mod:`povlens.rendering.photon_map`).
+    photon_settings: str = ""
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -271,6 +275,8 @@ class PovraySettings:
             del d["drop_right_columns"]
         if not self.radiosity_cache:        # nor those before the shared radiosity
             del d["radiosity_cache"]
+        if not self.photon_settings:        # nor those before the shared photon map
+            del d["photon_settings"]
         return d
 
 

@@ -60,6 +60,7 @@ __all__ = [
     "mesh_wrapper",
     "focal_blur_wrapper",
     "pinhole_wrapper",
+    "photon_map_block",
 ]
 
 #: Radius of the black sink sphere (scene units).  Generous compared with the
@@ -404,6 +405,33 @@ def mesh_wrapper(
     )
 
 
+def photon_map_block(settings: str, action: str, file_expr: str, flag: str) -> str:
+    """SDL that repeats a scene's photons settings with ``save_file`` or ``load_file``
+    when ``flag`` is declared (POV-Ray's ``Declare=FLAG=...``; "" when ``settings`` is
+    empty).
+
+    A second ``global_settings { photons { ... } }`` after the scene replaces the
+    scene's photons settings whole (measured on POV-Ray 3.7.0.10: ``glassthing.pov``
+    shot 95 photons instead of 29,127 with a bare ``save_file``), so the scene's own
+    items are repeated before the file name; the map then loads into an image
+    identical to the scene's own (RMSE 0).
+
+    Parameters
+    ----------
+    settings : the photons block's items (``SceneCamera.photon_settings``).
+    action : ``"save_file"`` or ``"load_file"``.
+    file_expr : an SDL string expression naming the file.
+    flag : the name that switches the block on.
+    """
+    if not settings:
+        return ""
+    if action not in ("save_file", "load_file"):
+        raise ValueError(f"action {action!r}: save_file or load_file")
+    _check_name(flag)
+    return (f"#ifdef ({flag}) global_settings {{ photons {{ {settings} {action} {file_expr} }} }}"
+            f" #end")
+
+
 def _perspective(
     template_vars: dict,
     scene_include,
@@ -412,8 +440,10 @@ def _perspective(
     right,
     up,
     assumed_gamma,
+    photons: str = "",
 ) -> str:
     return read_template("focal_blur_wrapper.pov.tmpl").substitute(
+        photons=photons,
         global_settings=_gamma_block(assumed_gamma),
         scene_include=pov_string(scene_include),
         location=pov_vector(location),
@@ -484,11 +514,14 @@ def pinhole_wrapper(
     up: Sequence[float],
     *,
     assumed_gamma: float | None = None,
+    photons: str = "",
 ) -> str:
     """Wrapper ``.pov`` text: the scene through a pinhole perspective camera.
 
     Same vectors as :func:`focal_blur_wrapper`, without focal blur.  The scene keeps
     its own ``#version`` (module docstring); text appended to the wrapper is read
-    under the scene's version.
+    under the scene's version.  ``photons``: SDL placed right after the scene
+    (:func:`photon_map_block`).
     """
-    return _perspective({"blur": ""}, scene_include, location, direction, right, up, assumed_gamma)
+    return _perspective({"blur": ""}, scene_include, location, direction, right, up,
+                        assumed_gamma, photons)

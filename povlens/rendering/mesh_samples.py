@@ -51,6 +51,7 @@ from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_
 from povlens.rendering.pixel_sampler import pixel_sampler
 from povlens.util.files import write_text
 from povlens.util.images import write_exr
+from povlens.rendering.photon_map import photon_load_args, photon_map_for
 from povlens.rendering.radiosity_cache import (STATISTICS_SWITCHES, probes_missing,
                                                radiosity_cache_for, radiosity_read_args,
                                                record_probe, sharing_chosen)
@@ -171,6 +172,7 @@ class _SampleRenders:
         self.povray_options = povray_options_of(plan.inputs)   # the user's, checked once
         # the radiosity samples of one pretrace, made before the first sample that reads
         # them; until the folder chose whether they pay, two samples measure that
+        self.photons = photon_load_args(photon_map_for(plan, outdir))    # shot once
         self.radiosity: list[str] = []
         self.probes: dict[int, str] = {}            # sample -> "own" / "shared", running
         self.choosing = plan.povray.radiosity_cache and sharing_chosen(outdir) is None
@@ -209,7 +211,8 @@ class _SampleRenders:
                 "f.exr", pv.render_width, pv.render_height, threads=1,
                 library_paths=[Path(self.plan.inputs.scene).parent],
                 povray_options=self.povray_options,
-                extra_args=[*MESH_SWITCHES, *radiosity, f"Declare=PovlensFrame={k}",
+                extra_args=[*MESH_SWITCHES, *radiosity, *self.photons,
+                            f"Declare=PovlensFrame={k}",
                             *film_row_args(pv, render_rows(self.plan, k))])
             cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
             with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:

@@ -47,8 +47,12 @@ def test_the_templates_get_the_names(tmp_path):
     assert names["batch_done_rule"] == "samples/batch_%.done"
     batch = read_template("mesh_batch.pov.tmpl").substitute(
         RenderFolder.mesh_include_names(), scene_include='"s.pov"', sink_centre="<0, 0, 0>",
-        sink_radius="1")
+        sink_radius="1", photons="")
     assert '#include concat("sample_", str(PovlensFrame, -4, 0), ".inc")' in batch
+    ph = RenderFolder.photon_map_names()
+    assert RenderFolder(tmp_path).photon_map_partial(123456).name == "photons-123456.tmp"
+    assert ph["save"] == 'concat("photons-", str(PovlensPhotonSave, 0, 0), ".tmp")'
+    assert ph["load"] == '"../photons.ph"' and RenderFolder(tmp_path).photon_map.name == "photons.ph"
 
 
 def test_a_sample_is_done_with_its_weights_and_image_or_blocked_marker(tmp_path):

@@ -241,7 +241,7 @@ def test_camera_block_and_wrappers():
     from povlens.plan.render_folder import RenderFolder
     batch = read_template("mesh_batch.pov.tmpl").substitute(
         RenderFolder.mesh_include_names(), scene_include='"s.pov"',
-        sink_centre="<0, 0, -1e5>", sink_radius="1")
+        sink_centre="<0, 0, -1e5>", sink_radius="1", photons="")
     assert _keeps_scene_version(batch, before="sphere {")
 
 

@@ -118,7 +118,7 @@ def test_mesh_wrappers_render_the_scene_as_povray_does(scene):
     from povlens.plan.render_folder import RenderFolder
     batch = write_text(folder / "batch.pov", read_template("mesh_batch.pov.tmpl").substitute(
         RenderFolder.mesh_include_names(), scene_include='"scene.pov"',
-        sink_centre=pov_vector(sink), sink_radius="1"))
+        sink_centre=pov_vector(sink), sink_radius="1", photons=""))
     frame = _render(batch, "batch", width=rw, height=rh, start_row=drop or None,
                     extra_args=["Declare=PovlensFrame=0"])[drop:]
     for img in (mesh, frame):

@@ -122,6 +122,9 @@ class SceneCamera:
         the module docstring.
     global_settings : the items of the scene's ``global_settings`` blocks, sorted
         (``"radiosity"``, ``"photons"``, ...; read on the way, not evaluated).
+    photon_settings : the items of the scene's last ``photons`` block in
+        ``global_settings`` as SDL text a later block can repeat (names replaced by
+        their values); "" when povlens cannot repeat it whole; None without one.
     """
 
     location: np.ndarray
@@ -141,6 +144,7 @@ class SceneCamera:
     source: str
     replaced: list[str] = dataclasses.field(default_factory=list)
     global_settings: tuple[str, ...] = ()
+    photon_settings: str | None = None
 
 
 def parse_scene_camera(
@@ -205,7 +209,8 @@ def parse_scene_camera(
     extra = list(notes.get("replaced", []))
     found = dataclasses.replace(_world_camera(cam),
                                 replaced=extra + _notes(cam, image_width, image_height),
-                                global_settings=notes.get("global_settings", ()))
+                                global_settings=notes.get("global_settings", ()),
+                                photon_settings=notes.get("photon_settings"))
     if files is not None:
         # the folders too: a file added there may shadow an include found elsewhere
         watched = [*files, path.parent, *libs]
@@ -262,7 +267,8 @@ def _read_camera(path: Path, image_width, image_height, libs, clock, declares
     # the files read (None: an include was not found, which a new file could change)
     notes: dict = {"used": set(reader.stream.used_names),
                    "files": None if reader.unread_includes else list(reader.included),
-                   "global_settings": tuple(sorted(reader.global_settings))}
+                   "global_settings": tuple(sorted(reader.global_settings)),
+                   "photon_settings": reader.photon_settings}
     if cam is None:
         if reader.unread_includes:
             raise SceneCameraError(

@@ -67,6 +67,11 @@ class SceneReader:
         #: The items of the scene's ``global_settings`` blocks (``radiosity``,
         #: ``photons``, ``assumed_gamma`` ...), as far as they can be read.
         self.global_settings: set[str] = set()
+        #: The items of the scene's last ``photons`` block in ``global_settings`` as SDL
+        #: text (names replaced by their values), "" if povlens cannot repeat it whole
+        #: (a macro it cannot follow, a name without a value, the scene's own
+        #: ``save_file``/``load_file``), None if there is none.
+        self.photon_settings: str | None = None
 
     @property
     def unread_includes(self) -> list[str]:
@@ -143,7 +148,51 @@ class SceneReader:
                 depth += 1 if tok.text == "{" else -1
             elif depth == 1 and tok.kind == "ident":
                 self.global_settings.add(tok.text)
+                nxt = ds.peek(0, expand=False)
+                if tok.text == "photons" and nxt.kind == "op" and nxt.text == "{":
+                    ds.next()
+                    self.photon_settings = self._photons_items()
+
+    def _photons_items(self) -> str:
+        """After a ``photons`` block's '{': its items as SDL text, to after its '}'
+        (:attr:`photon_settings`; "" when they cannot be repeated whole)."""
+        ds = self.stream
+        depth, out, whole = 1, [], True
+        while depth:
+            try:
+                tok = ds.next()
+            except SdlEvalError:
+                whole = False
+                continue
+            if tok.kind in ("eof", "stop"):
+                return ""
+            if tok.kind == "op" and tok.text in "{}":
+                depth += 1 if tok.text == "{" else -1
+                if not depth:
+                    break
+            text = _sdl_text(tok)
+            whole = whole and text is not None and tok.text not in ("save_file", "load_file")
+            out.append(text or "")
+        return " ".join(out) if whole else ""
 
     def _loop_abandoned(self, frame: Frame, reason: str) -> None:
         if any(f is frame for f in self.camera_frames) and isinstance(self.camera, CameraState):
             self.camera = UnknownValue(f"{self.camera.where}: the camera statement is inside {reason}")
+
+
+def _sdl_text(tok: Token) -> str | None:
+    """A token as SDL text a later block can repeat: a declared name as its value (a
+    number, a vector or a string), others as written; None for a name whose value
+    povlens does not know."""
+    if tok.kind != "ident" or tok.bound is None or tok.bound[0] is None:
+        return tok.text
+    value = tok.bound[0]
+    if isinstance(value, bool) or isinstance(value, (int, float)):
+        return repr(float(value))
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    try:
+        numbers = [float(v) for v in value]
+    except (TypeError, ValueError):
+        return None
+    return "<" + ", ".join(repr(v) for v in numbers) + ">"
