@@ -264,7 +264,10 @@ def _print_table_summary(r: _Report) -> None:
           f"({r.method}); F/{p.f_number:.3g} (stop {p.stop_diameter:.4g} mm); {film_txt}")
     st = table.stats
     print(f"pupil table: {table.plane} plane at z = {table.plane_z_mm:.3f} mm, "
-          f"{table.n_knots} knots x {table.n_angles} angles, tolerance {table.tolerance:g}, "
+          + (f"a {table.grid_shape[0]}x{table.grid_shape[1]} grid of film points over x and y "
+             f"(anamorphic lens)" if getattr(table, "kind", "") == "grid"
+             else f"{table.n_knots} knots") + f" x {table.n_angles} angles, "
+          f"tolerance {table.tolerance:g}, "
           f"{st.get('rays_traced', 0):,} rays, {st.get('build_time_s', 0):.3f} s")
     print(f"  on-axis irradiance factor E/L = {table.axial_irradiance_factor:.5f} "
           f"(pi/(4 N^2) = {math.pi / (4 * p.f_number ** 2):.5f}); exposure normalisation "

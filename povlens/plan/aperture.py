@@ -139,8 +139,11 @@ def apply_aperture_shape(opts, plan, lens, table) -> None:
         plan.add_note(FOCAL_BLUR_NOTE.format(what=describe(shape)))
     fm = plan.field_mesh
     if (shape.blades is None or shape.mask is not None or table is None
-            or plan.inputs.method != "mesh" or fm is not None):
-        return      # field meshes: the ellipses of the round stop hold the iris's regions
+            or plan.inputs.method != "mesh" or fm is not None
+            or getattr(table, "kind", "radial") == "grid"):
+        # field meshes: the ellipses of the round stop hold the iris's regions; an
+        # anamorphic lens's per-pixel meshes draw from its grid table's, which hold them too
+        return
     from povlens.pupil.aperture_domain import iris_domain
     from povlens.pupil.band_table import band_table
     from povlens.pupil.field import bounding_disc_radius_mm

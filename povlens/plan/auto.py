@@ -31,6 +31,7 @@ import numpy as np
 
 from povlens.lens.film import Film
 from povlens.plan.adaptive import adaptive_rows
+from povlens.plan.anamorphic import anamorphic_text
 from povlens.plan.aperture import AUTO_NOTE, PINHOLE_NOTE, describe
 from povlens.plan.decision import decide, model_depths, pupil_cut, shift_tilt_cos
 from povlens.plan.depth_probe import DepthProbe, ProbeView, axial_depth, depth_limits, start_probe
@@ -40,6 +41,7 @@ from povlens.plan.plan_start import start_plan
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pupil.illumination import illumination_profile, profile_record
+from povlens.pupil.grid_table import frame_extent_mm
 from povlens.pupil.storage import cached_pupil_table
 from povlens.thinlens.model_error import measure_model_error
 from povlens.util.threads import run_in_background
@@ -143,7 +145,8 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     try:
         if table is None:  # exact vignetting; normally saved by the plan
             table, _ = cached_pupil_table(RenderFolder(opts.outdir).pupil_npz, lens, fd,
-                                          film.max_field_radius_mm, save=False)
+                                          film.max_field_radius_mm, save=False,
+                                          film_extent_mm=frame_extent_mm(film))
     except BaseException:
         probe.cancel()
         raise
@@ -161,18 +164,22 @@ def choose_method(opts, plan: Plan, model, lens, film: Film, *, probe: DepthProb
     err = measure_model_error(lens, fd, model, film, model_depths(model, near_z, far_z),
                               pupil_table=table)
     profile = profile_of()
+    # an anamorphic lens: its illumination is over x and y, and focal_blur is ruled out
+    # whatever its cat's eye (povlens.plan.anamorphic)
+    ana = None if plan.anamorphic is None else anamorphic_text(plan.anamorphic)
     image_error = None
     if probe.image is not None:
         image_error = probe_image_error(probe.image, film, err, opts.auto.tolerance_px,
-                                        profile=profile, table=table, model=model,
-                                        axial_mm=axial)
+                                        profile=profile, table=None if ana else table,
+                                        model=model, axial_mm=axial)
     d = decide(near_z_mm=near_z, far_z_mm=far_z, model=model, model_error=err,
                pixel_pitch_mm=film.pixel_pitch_mm, tolerance_px=opts.auto.tolerance_px,
                vignetting=opts.sampling.vignetting, image_error=image_error,
-               catseye=pupil_cut(profile),
+               catseye=None if ana else pupil_cut(profile),
                aperture_shape=(describe(lens.aperture_shape) if lens.aperture_shape is not None
                                else None),
-               shift_tilt_cos=shift_tilt_cos(film.shift_mm, model.image_distance_mm))
+               shift_tilt_cos=shift_tilt_cos(film.shift_mm, model.image_distance_mm),
+               anamorphic=ana)
     if lens.aperture_shape is not None:
         d.add_remark((AUTO_NOTE if d.method == "mesh" else PINHOLE_NOTE).format(
             what=describe(lens.aperture_shape)))

@@ -118,14 +118,15 @@ def vector_tuple(a) -> tuple[float, float, float]:
     return tuple(float(x) for x in np.asarray(a, dtype=np.float64).tolist())
 
 
-def off_axis_direction(forward, right, up, film: Film, image_distance_mm: float) -> np.ndarray:
+def off_axis_direction(forward, right, up, film: Film, image_distance_mm) -> np.ndarray:
     """POV-Ray's perspective ``direction`` for a shifted film (:mod:`povlens.lens.film`).
 
     Parameters
     ----------
     forward, right, up : (3,) unit vectors of the camera (world frame).
     film : the film; its shift (mm, image plane) tilts the direction.
-    image_distance_mm : the thin lens's image distance (mm), which scales right/up.
+    image_distance_mm : the thin lens's image distance (mm), which scales right/up; or
+        (v_x, v_y), one per meridian (an anamorphic lens).
 
     Returns
     -------
@@ -136,9 +137,9 @@ def off_axis_direction(forward, right, up, film: Film, image_distance_mm: float)
         (unit) without a shift.
     """
     sx, sy = film.shift_mm
-    v = float(image_distance_mm)
-    return (np.asarray(forward, np.float64) + (sx / v) * np.asarray(right, np.float64)
-            + (sy / v) * np.asarray(up, np.float64))
+    vx, vy = (float(v) for v in np.broadcast_to(np.asarray(image_distance_mm, float), (2,)))
+    return (np.asarray(forward, np.float64) + (sx / vx) * np.asarray(right, np.float64)
+            + (sy / vy) * np.asarray(up, np.float64))
 
 
 #: How the scene-camera reader's note on the camera's proportions begins

@@ -75,7 +75,8 @@ __all__ = ["FOCAL_BLUR_ADAPTIVE", "decide", "Check", "VignettingCheck", "Decisio
            "decision_numbers", "shape_error_px", "blur_range_px", "model_depths",
            "samples_for_blur", "pupil_cut", "shift_tilt_cos", "catseye_px",
            "SAMPLES_PER_BLUR_PX", "MIN_SAMPLES", "MAX_SAMPLES", "SAMPLE_RULE",
-           "VIGNETTING_TOLERANCE", "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE"]
+           "VIGNETTING_TOLERANCE", "STRONG_VIGNETTING", "VIGNETTING_FLOOR_SHARE",
+           "ANAMORPHIC_REASON"]
 
 #: Lens samples per pixel of the largest blur diameter: the least that reaches the FLIP
 #: of a 0.5 px move on every measured scene and lens (docs/decisions/exact-images.md).
@@ -90,6 +91,10 @@ SAMPLE_RULE = (f"N = ceil({SAMPLES_PER_BLUR_PX:g} b) rounded to the nearest powe
 #: "Vignetting floor", where it was the vignetting itself, and "Vignetting applied as
 #: a map").
 VIGNETTING_FLOOR_SHARE = 0.6
+#: The reason line of an anamorphic lens's decision (its description in ``what``).
+ANAMORPHIC_REASON = ("focal-blur: cannot draw an anamorphic lens ({what}): POV-Ray's "
+                     "focal_blur has one focal length and a round pupil, so its blur is round "
+                     "where the lens's is oval: ruled out")
 #: focal_blur sampling of --method auto: POV-Ray's adaptive sampling (sharp pixels stop
 #: at the minimum, so no depth-dependent count is needed; docs/decisions/planning.md).
 FOCAL_BLUR_ADAPTIVE = FocalBlurSettings(min_samples=32, max_samples=256, confidence=0.99,
@@ -347,6 +352,7 @@ class Verdict(enum.Enum):
     MESH_CATSEYE = "mesh: the cat's eye"           # the cat's eye is beyond the budget
     MESH_APERTURE = "mesh: the aperture shape"     # a shaped stop, and visible blur
     MESH_LENS = "mesh: the real lens"              # the real lens deviates from the thin lens
+    MESH_ANAMORPHIC = "mesh: an anamorphic lens"   # two focal lengths focal_blur cannot draw
 
     @property
     def method(self) -> str:
@@ -432,7 +438,8 @@ def measure_checks(near_z_mm: float, far_z_mm: float, model, model_error: ModelE
 def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: ModelError,
            pixel_pitch_mm: float, tolerance_px: float = 0.5, vignetting: bool = True,
            image_error: dict | None = None, catseye: dict | None = None,
-           aperture_shape: str | None = None, shift_tilt_cos: float = 1.0) -> Decision:
+           aperture_shape: str | None = None, shift_tilt_cos: float = 1.0,
+           anamorphic: str | None = None) -> Decision:
     """Choose the render method and its lens samples (pure; see the module docstring).
 
     Parameters
@@ -456,6 +463,10 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: ModelError,
     shift_tilt_cos : with a lens shift, cos of the tilt of POV-Ray's ``direction``
         (:func:`shift_tilt_cos`): focal_blur's disc is that much narrower along the
         shift, and half the lost diameter counts against the budget.  1: no shift.
+    anamorphic : a few words on an anamorphic lens (its two focal lengths and squeeze,
+        :func:`povlens.plan.anamorphic.describe`): focal_blur, with one focal length and
+        a round pupil, cannot draw it, so it is ruled out (the pinhole view, framed per
+        meridian, stays when everything is sharp).  None: a rotationally symmetric lens.
 
     Returns
     -------
@@ -468,6 +479,8 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: ModelError,
                             shift_tilt_cos)
     if checks.pinhole_passes:
         verdict = Verdict.PINHOLE
+    elif anamorphic:
+        verdict = Verdict.MESH_ANAMORPHIC
     elif checks.thin_lens_passes:
         verdict = Verdict.MESH_FLOOR if checks.floor_prefers_mesh else Verdict.FOCAL_BLUR
     elif checks.geometry_passes and not checks.aperture_shape:
@@ -476,7 +489,7 @@ def decide(*, near_z_mm: float, far_z_mm: float, model, model_error: ModelError,
         verdict = Verdict.MESH_APERTURE
     else:
         verdict = Verdict.MESH_LENS
-    reasons = decision_reasons(checks, verdict)
+    reasons = decision_reasons(checks, verdict, anamorphic)
     numbers = decision_numbers(checks, verdict, model_error)
     if verdict is Verdict.PINHOLE:
         return Decision("pinhole", 1, reasons, numbers)
@@ -521,9 +534,11 @@ def decision_numbers(c: DecisionChecks, verdict: Verdict, e: ModelError) -> dict
     return numbers
 
 
-def decision_reasons(c: DecisionChecks, verdict: Verdict) -> list[str]:
+def decision_reasons(c: DecisionChecks, verdict: Verdict,
+                     anamorphic: str | None = None) -> list[str]:
     """The reasons of a decision, one line each: the depth range, the pinhole view's
-    checks and, past a pinhole verdict, focal_blur's; the conclusion last."""
+    checks and, past a pinhole verdict, focal_blur's (with an anamorphic lens, why
+    focal_blur cannot draw it); the conclusion last."""
     far = "infinity" if math.isinf(c.far_z_mm) else f"{c.far_distance_mm / 1000:.3g} m"
     reasons = [f"depth range {c.near_distance_mm / 1000:.3g} m to {far} from the entrance "
                f"pupil; focus {'inside' if c.focus_inside_range else 'outside'} the range"]
@@ -539,6 +554,8 @@ def decision_reasons(c: DecisionChecks, verdict: Verdict) -> list[str]:
         if c.aperture_shape:
             reasons.append(f"focal-blur: cannot draw the aperture shape ({c.aperture_shape}); "
                            f"the blur is visible")
+        if anamorphic:
+            reasons.append(ANAMORPHIC_REASON.format(what=anamorphic))
     reasons.append(_conclusion(c, verdict))
     return reasons
 
@@ -601,7 +618,10 @@ def _conclusion(c: DecisionChecks, verdict: Verdict) -> str:
            Verdict.MESH_APERTURE: f"focal_blur cannot draw the aperture shape "
                                   f"({c.aperture_shape}) and the blur is visible",
            Verdict.MESH_LENS: "the real lens deviates from the equivalent thin lens beyond "
-                              "the budget"}[verdict]
+                              "the budget",
+           Verdict.MESH_ANAMORPHIC: "the lens is anamorphic, with two focal lengths and oval "
+                                    "out-of-focus light that focal_blur cannot draw, and the "
+                                    "pinhole view is not sharp enough"}[verdict]
     return (f"-> mesh: {why}; {c.blur_rule_samples} samples for a {c.max_blur_px:.3g} px "
             f"blur ({SAMPLE_RULE})")
 

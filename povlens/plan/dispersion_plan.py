@@ -31,6 +31,12 @@ COLOUR_MODEL = ("Cauchy n = A + B/lambda^2 through n_d and n_F - n_C = (n_d - 1)
                 "normalised per channel")
 
 
+#: The note of ``--dispersion`` on an anamorphic lens (not rendered yet).
+ANAMORPHIC_NOTE = ("--dispersion: not rendered for an anamorphic lens yet (its pupil table over "
+                   "the film's x and y has no band of wavelengths), so the image shows no colour "
+                   "fringes ({colour})")
+
+
 def apply_dispersion(opts, plan, lens, table) -> None:
     """Record ``--dispersion`` in ``plan`` (module docstring); nothing without it.
 
@@ -60,6 +66,9 @@ def apply_dispersion(opts, plan, lens, table) -> None:
     if opts.sampling.method != "mesh":
         plan.add_note(f"--dispersion: only the mesh method renders colour fringes; this "
                       f"{opts.sampling.method} render shows none ({colour})")
+        return
+    if getattr(table, "kind", "radial") == "grid":
+        plan.add_note(ANAMORPHIC_NOTE.format(colour=colour))
         return
     # the samples draw from the d-line table grown to hold the band's pass regions: per-pixel
     # meshes from its polygons, field meshes from the ellipses that hold them

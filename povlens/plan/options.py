@@ -296,6 +296,11 @@ class FilmOptions(_Record):
     real_focus: bool = option(
         True, "place the film by the thick-lens equation, not the real-ray focus",
         flag="--thick-lens-focus", sets="false", check=flag)
+    desqueeze: bool = option(
+        True, "anamorphic lenses: the image as a projector with the matching anamorphic lens "
+        "shows it (the film sampled with pixels 'squeeze' times as tall as wide, no "
+        "resampling); --no-desqueeze: the film as exposed, squeezed (povlens.plan.anamorphic)",
+        flag="--desqueeze", sets="both", check=flag, stored=False)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -23,6 +23,7 @@ import numpy as np
 from povlens.errors import ParameterError
 from povlens.lens.film import Film
 from povlens.lens.prescription import LensPrescription
+from povlens.plan.anamorphic import apply_anamorphic
 from povlens.plan.aperture import apply_aperture_shape, inputs_of_shape
 from povlens.plan.batches import round_robin_batches
 from povlens.plan.camera_setup import vector_tuple
@@ -35,6 +36,7 @@ from povlens.plan.schema import (CameraPlacement, FocusSolution, Inputs, LensSum
 from povlens.pov.mesh import default_sink_centre, render_size
 from povlens.pov.executable import povray_version
 from povlens.pov.povray_options import PovrayOptions
+from povlens.pupil.grid_table import frame_extent_mm
 from povlens.pupil.storage import cached_pupil_table
 from povlens.thinlens.model import EquivalentThinLens
 from povlens.thinlens.model_error import ModelError, measure_model_error
@@ -81,6 +83,7 @@ def _inputs(opts: ConvertOptions, st: PlanStart) -> Inputs:
         povray_options=st.povray.extra_options,
         ray_mesh=opts.sampling.ray_mesh if opts.sampling.method == "mesh" else None,
         shift_mm=st.film.shift_mm if st.film.shifted else None,
+        desqueeze=None if st.anamorphic is None else bool(opts.film.desqueeze),
         **inputs_of_shape(st.lens.aperture_shape))
 
 
@@ -160,7 +163,8 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReus
     if table is None and not skip:  # exact vignetting; saved in OUTDIR for the render
         table, _ = cached_pupil_table(RenderFolder(opts.outdir).pupil_npz, lens,
                                       st.film_distance_mm, film.max_field_radius_mm,
-                                      save=Path(opts.outdir).is_dir())
+                                      save=Path(opts.outdir).is_dir(),
+                                      film_extent_mm=frame_extent_mm(film))
     check_shift_sees_light(film, table, lens.source)
     if model_error is None and not skip:
         depths = _standard_depths_mm(model, st.object_distance_mm, p.efl)
@@ -188,6 +192,7 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReus
     plan.add_note(_antialias_note(opts, st))
     plan.add_note(PINHOLE_NOTE if skip else None)
     plan.add_note(shift_focal_blur_note(plan) if opts.sampling.method == "focal-blur" else None)
+    apply_anamorphic(opts, plan, st)             # two focal lengths: the record, focal_blur
     _field_mesh(opts, plan, st, placement, table)
     apply_dispersion(opts, plan, lens, table)    # --dispersion: colour numbers, wider disc
     apply_aperture_shape(opts, plan, lens, table)  # iris/mask: notes, the iris's pupil domain

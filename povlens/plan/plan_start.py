@@ -20,6 +20,7 @@ from povlens.lens.focus import UNITS_MM, exact_film_distance_mm, thick_lens_film
 from povlens.lens.aperture_shape import shaped_lens
 from povlens.lens.paraxial import paraxial_data, stopped_down
 from povlens.lens.prescription import LensPrescription, read_lens
+from povlens.plan.anamorphic import anamorphic_data_of, anamorphic_record, squeezed_film
 from povlens.plan.aperture import shape_of_options
 from povlens.plan.camera_setup import (camera_basis, camera_notes, film_of, focus_of,
                                        framing_note, off_axis_direction, scene_camera_of,
@@ -84,6 +85,7 @@ class PlanStart:
     notes: list[str] = dataclasses.field(default_factory=list)  # Plan.notes of the camera
     scene_settings: tuple[str, ...] = ()   # the items of the scene's global_settings
     scene_photons: str | None = None       # its photons block's items (SceneCamera)
+    anamorphic: dict | None = None         # Plan.anamorphic (povlens.plan.anamorphic)
 
 
 def start_plan(opts: ConvertOptions) -> PlanStart:
@@ -119,29 +121,47 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
     if opts.film.shift_mm is not None:        # lens shift: the frame off the axis (lens.film)
         sx, sy = parse_shift(opts.film.shift_mm)
         film = dataclasses.replace(film, shift_x_mm=sx, shift_y_mm=sy)
+    ana = anamorphic_data_of(lens)            # two focal lengths: the film desqueezed
+    ana_notes = []
+    if ana is not None:
+        film, note = squeezed_film(film, ana, opts.film.desqueeze,
+                                   opts.film.film_size_mm is not None)
+        ana_notes.append(note)
     focus, focus_from = focus_of(opts, cam)
     focus_mm = focus * mm_per_unit
     film_d, object_d, thick_d, spot = _focus(lens, p, focus_mm, opts.film.real_focus)
     model = fit_thin_lens(lens, film_d, object_d, film)
     loc, right, up, fwd, cam_source = camera_basis(opts, cam)
+    camera = _povray_camera(loc, right, up, fwd, film, model, mm_per_unit)
+    start = PlanStart(mm_per_unit, lens, p, film, focus_mm, film_d, object_d, thick_d, spot,
+                     model, loc, right, up, fwd, cam_source, camera, focus, focus_from,
+                     povray, camera_notes(cam, proportions) + _framing(cam, film, model, opts)
+                     + ana_notes,
+                     () if cam is None else tuple(cam.global_settings),
+                     None if cam is None else cam.photon_settings)
+    if ana is not None:
+        start.anamorphic = anamorphic_record(ana, model, film, opts.film.desqueeze)
+    return start
+
+
+def _povray_camera(loc, right, up, fwd, film, model, mm_per_unit: float) -> PovrayCamera:
+    """POV-Ray's camera of the views: the thin lens's projection (``right`` and ``up``
+    scaled by the film over each meridian's image distance: an anamorphic lens frames
+    its two meridians apart), aperture and plane in focus."""
+    vx, vy = model.image_distances_mm
     # lens shift: an off-axis frustum, POV-Ray's direction tilted by the shift while
     # right/up (the image plane) stay; focal_blur's focal plane then lies at
     # focal_distance / |direction| along the axis, so the distance is scaled by it
-    direction = off_axis_direction(fwd, right, up, film, model.image_distance_mm)
+    direction = off_axis_direction(fwd, right, up, film, (vx, vy))
     stretch = float(np.linalg.norm(direction))
-    camera = PovrayCamera(
+    return PovrayCamera(
         location=vector_tuple(loc), direction=vector_tuple(direction),
-        right=vector_tuple(right * film.width_mm / model.image_distance_mm),
-        up=vector_tuple(up * film.height_mm / model.image_distance_mm),
+        right=vector_tuple(right * film.width_mm / vx),
+        up=vector_tuple(up * film.height_mm / vy),
         aperture=2.0 * model.pupil_diameter_mm / mm_per_unit,
         focal_distance=(model.focus_distance_mm / mm_per_unit * stretch
                         if math.isfinite(model.focus_distance_mm) else 1e9),
-        hfov_deg=math.degrees(2 * math.atan(0.5 * film.width_mm / model.image_distance_mm)))
-    return PlanStart(mm_per_unit, lens, p, film, focus_mm, film_d, object_d, thick_d, spot,
-                     model, loc, right, up, fwd, cam_source, camera, focus, focus_from,
-                     povray, camera_notes(cam, proportions) + _framing(cam, film, model, opts),
-                     () if cam is None else tuple(cam.global_settings),
-                     None if cam is None else cam.photon_settings)
+        hfov_deg=math.degrees(2 * math.atan(0.5 * film.width_mm / vx)))
 
 
 def _framing(cam, film, model, opts) -> list[str]:
@@ -149,5 +169,5 @@ def _framing(cam, film, model, opts) -> list[str]:
     a film size or lens shift the user chose frames as the user means)."""
     if opts.film.film_size_mm is not None or opts.film.shift_mm is not None:
         return []
-    note = framing_note(cam, film, model.image_distance_mm, Path(str(opts.lens)).name)
+    note = framing_note(cam, film, model.image_distances_mm[0], Path(str(opts.lens)).name)
     return [] if note is None else [note]

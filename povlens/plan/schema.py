@@ -144,6 +144,9 @@ class Inputs:
     #: --dispersion: True when each lens sample is traced at its own wavelength
     #: (povlens.rendering.spectral); None: not asked, or not rendered (plan.notes say why).
     dispersion: bool | None = None
+    #: Anamorphic lenses: whether the image is desqueezed (povlens.plan.anamorphic);
+    #: None for a rotationally symmetric lens.
+    desqueeze: bool | None = None
 
     #: Fields written only when set (--method auto's, the focus's source, the user's
     #: POV-Ray options, the kind of ray mesh: None in plans before field meshes, which
@@ -151,7 +154,7 @@ class Inputs:
     AUTO_FIELDS = ("requested_method", "tolerance_px", "auto_samples", "focus_from", "focus_at",
                    "library_paths", "clock", "povray_options", "ray_mesh", "shift_mm",
                    "aperture_blades", "blade_curvature", "blade_rotation_deg", "aperture_image",
-                   "aperture_image_sha256", "dispersion")
+                   "aperture_image_sha256", "dispersion", "desqueeze")
 
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
@@ -468,6 +471,9 @@ class Plan:
     #: per-pixel meshes with an iris: {domain_radius_mm, flip, disc_radius_mm} of the
     #: domain their sampler uses where it is tighter (povlens.pupil.iris_sampler).
     pixel_iris: dict | None = None
+    #: an anamorphic lens: both meridians' first-order data, the squeeze, the desqueeze
+    #: and the film's pixel aspect (povlens.plan.anamorphic.anamorphic_record).
+    anamorphic: dict | None = None
 
     def add_note(self, text: str | None) -> None:
         """Add a note (:attr:`notes`) unless it is empty or already there."""
@@ -523,6 +529,8 @@ class Plan:
             d["dispersion"] = self.dispersion
         if self.pixel_iris is not None:
             d["pixel_iris"] = self.pixel_iris
+        if self.anamorphic is not None:
+            d["anamorphic"] = self.anamorphic
         return _json_ready(d)
 
     @classmethod
@@ -546,7 +554,9 @@ class Plan:
             placement=CameraPlacement.from_dict(d["placement"]),
             thin_lens=EquivalentThinLens(tl["centre_z_mm"], tl["image_distance_mm"],
                                          tl["pupil_diameter_mm"], _inf_if_none(tl["focus_z_mm"]),
-                                         tl.get("fov_fit_rms_mm", 0.0)),
+                                         tl.get("fov_fit_rms_mm", 0.0),
+                                         tl.get("image_distance_x_mm"),
+                                         tl.get("pupil_diameter_x_mm")),
             povray_camera=PovrayCamera.from_dict(d["povray_camera"]),
             model_error=ModelError.from_dict(d["model_error"]) if d["model_error"] else None,
             povray=_fields_of(PovraySettings, d["povray"]),
@@ -560,7 +570,7 @@ class Plan:
             field_mesh=None if d.get("field_mesh") is None
             else FieldMeshSettings.from_dict(d["field_mesh"]),
             vignetting_map=d.get("vignetting_map"), dispersion=d.get("dispersion"),
-            pixel_iris=d.get("pixel_iris"))
+            pixel_iris=d.get("pixel_iris"), anamorphic=d.get("anamorphic"))
 
 
 def plan_path(path: str | os.PathLike) -> Path:

@@ -86,8 +86,9 @@ def early_guess(opts: ConvertOptions, plan0: Plan) -> str:
     Returns
     -------
     str
-        * ``"mesh"``: the lens alone rules out the views (:func:`lens_rules_out_views`):
-          the first lens samples of the mesh render;
+        * ``"mesh"``: the lens alone rules out the views (:func:`lens_rules_out_views`;
+          a shaped stop or an anamorphic lens, which focal_blur cannot draw, with a
+          visible blur): the first lens samples of the mesh render;
         * ``"either"``: the thin lens may do, but the lens vignettes strongly and
           blurs enough for its cat's eye to matter (:func:`vignetting_may_choose_mesh`):
           whether the decision takes mesh depends on the scene's depths, so both
@@ -97,7 +98,11 @@ def early_guess(opts: ConvertOptions, plan0: Plan) -> str:
     """
     if lens_rules_out_views(opts, plan0):
         return "mesh"
-    e = plan0.model_error      # a shaped stop: focal_blur is out wherever blur shows
+    e = plan0.model_error
+    if plan0.anamorphic is not None and np.size(e.blur_model_px) and (
+            np.max(e.blur_model_px) >= opts.auto.tolerance_px):
+        return "mesh"          # an anamorphic lens: no focal_blur (povlens.plan.anamorphic)
+    # a shaped stop: focal_blur is out wherever blur shows
     if ((opts.aperture.aperture_blades or opts.aperture.aperture_image)
             and np.size(e.blur_model_px) and np.max(e.blur_model_px) >= opts.auto.tolerance_px):
         return "mesh"

@@ -150,6 +150,11 @@ class GridPupilTable(SamplerMeasurements):
         return int(self.rho.shape[2])
 
     @property
+    def n_knots(self) -> int:
+        """The grid's nodes, Kx Ky (the radial table's count of knots)."""
+        return int(self.knots_x_mm.size * self.knots_y_mm.size)
+
+    @property
     def grid_shape(self) -> tuple[int, int]:
         return int(self.knots_x_mm.size), int(self.knots_y_mm.size)
 

@@ -19,6 +19,7 @@ from povlens.plan.aperture import shape_of_inputs
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.pupil.monte_carlo import exposure_normalisation
+from povlens.pupil.grid_table import frame_extent_mm
 from povlens.pupil.storage import cached_pupil_table
 
 __all__ = ["lens_for", "pupil_table_for", "exposure_for"]
@@ -37,10 +38,12 @@ def lens_for(plan: Plan):
 
 
 def pupil_table_for(outdir: str | os.PathLike, plan: Plan, lens):
-    """The exit-pupil table of this plan, from ``pupil.npz`` if it is current."""
+    """The exit-pupil table of this plan, from ``pupil.npz`` if it is current (over the
+    frame's x and y for an anamorphic lens: :func:`povlens.pupil.storage.cached_pupil_table`)."""
     film = plan.film
     table, _ = cached_pupil_table(RenderFolder(outdir).pupil_npz, lens,
-                                  plan.focus.film_distance_mm, film.max_field_radius_mm)
+                                  plan.focus.film_distance_mm, film.max_field_radius_mm,
+                                  film_extent_mm=frame_extent_mm(film))
     return table
 
 

@@ -135,7 +135,9 @@ def _bundle_geometry(lens, film_distance_mm, model, film, object_z_mm, n_field, 
     depths = np.atleast_1d(np.asarray(object_z_mm, dtype=np.float64))
     hs = np.linspace(0.0, film.max_field_radius_mm, n_field)   # out to a shifted frame's corner
     diag_dir = np.array([film.width_mm, film.height_mm]) / math.hypot(film.width_mm, film.height_mm)
-    disc = pupil_disc_points(n_rings) * (0.75 * model.pupil_diameter_mm)
+    # an anamorphic lens's bundle covers the larger of its two pupils
+    disc = pupil_disc_points(n_rings) * (0.75 * max(model.pupil_diameter_mm,
+                                                    model.pupil_diameter_x_mm or 0.0))
     ep_z = model.centre_z_mm
     chief, found = _chief_rays_remembered(lens, film_distance_mm, hs)
     with np.errstate(all="ignore"):
@@ -205,7 +207,7 @@ def measure_model_error(lens: LensPrescription, film_distance_mm: float,
         elong = np.where(ev[..., 0] > 0, np.sqrt(ev[..., 1] / ev[..., 0]), 1.0)
     out["elongation"] = np.where(spot, elong, 1.0)
     if pupil_table is not None:
-        ri = _table_relative_illumination(pupil_table, hs)
+        ri = _table_relative_illumination(pupil_table, hs, diag_dir)
         out["relative_illumination"] = np.broadcast_to(ri[None, :], (nd, nf)).copy()
     else:
         frac = cnt / len(disc)
@@ -254,7 +256,7 @@ def _trace_bundles(lens, film_distance_mm, model, depths, target_film, disc, ep_
     passed (D, F, M) and where they land on the film (D, F, M, 2; 0 where blocked)."""
     m = len(disc)
     nd, nf = len(depths), len(target_film)
-    tan = -target_film / model.image_distance_mm              # (F, 2)
+    tan = model.tan_of_film(target_film)                      # (F, 2); per meridian
     pupil = disc[None, :, :] + centres[:, None, :]            # (F, M, 2) on z = ep_z
     origin, direction = rays_near_lens(lens, film_distance_mm, depths[:, None, None],
                                        tan[None, :, None, :], pupil[None], ep_z)
@@ -282,9 +284,16 @@ def _spot_moments(ok: np.ndarray, xy: np.ndarray):
     return cnt, c, ev
 
 
-def _table_relative_illumination(pupil_table, hs: np.ndarray) -> np.ndarray:
-    """E(h) / E(0) at the film heights ``hs`` (F,), exact from the exit-pupil table."""
-    e = np.asarray(pupil_table.irradiance_factor(hs), dtype=np.float64)
+def _table_relative_illumination(pupil_table, hs: np.ndarray,
+                                 diag_dir: np.ndarray | None = None) -> np.ndarray:
+    """E(h) / E(0) at the film heights ``hs`` (F,), exact from the exit-pupil table; for a
+    table over the film's x and y (an anamorphic lens) at the film points -h ``diag_dir``
+    (the model error's own)."""
+    if getattr(pupil_table, "kind", "radial") == "grid" and diag_dir is not None:
+        e = pupil_table.irradiance_factor_at(-np.asarray(hs)[:, None] * diag_dir[None, :])
+    else:
+        e = pupil_table.irradiance_factor(hs)
+    e = np.asarray(e, dtype=np.float64)
     return e / e[0] if e[0] > 0 else np.zeros_like(e)
 
 
@@ -303,7 +312,7 @@ def measure_model_error_reference(lens: LensPrescription, film_distance_mm: floa
     m = len(disc)
     relative_illumination = None
     if pupil_table is not None:
-        relative_illumination = _table_relative_illumination(pupil_table, hs)
+        relative_illumination = _table_relative_illumination(pupil_table, hs, diag_dir)
     out = {k: np.zeros((len(depths), n_field)) for k in
            ("distortion_px", "blur_real_px", "blur_model_px", "elongation",
             "relative_illumination")}
@@ -311,7 +320,7 @@ def measure_model_error_reference(lens: LensPrescription, film_distance_mm: floa
     for a, z in enumerate(depths):
         for b, hgt in enumerate(hs):
             target_film = -hgt * diag_dir                     # model image point on the film
-            tan = -target_film / model.image_distance_mm       # object direction from the EP
+            tan = model.tan_of_film(target_film)               # object direction from the EP
             origin, direction = rays_near_lens(lens, film_distance_mm, np.full(m, z), tan,
                                                disc + centres[b], ep_z)
             res = trace_from_scene(lens, film_distance_mm, origin, direction)

@@ -33,9 +33,27 @@ def _inputs(case: dict) -> dict:
 
 
 def test_the_cases_cover_every_verdict():
+    """Every verdict of the release before the records (the anamorphic lens's came after:
+    :func:`test_an_anamorphic_lens_rules_focal_blur_out`)."""
     conclusions = {c["decision"]["reasons"][-1].split(":")[0] for c in CASES}
     assert conclusions == {"-> pinhole", "-> focal-blur", "-> mesh"}
-    assert len({c["decision"]["reasons"][-1][:40] for c in CASES}) == len(Verdict)
+    assert len({c["decision"]["reasons"][-1][:40] for c in CASES}) == len(Verdict) - 1
+
+
+def test_an_anamorphic_lens_rules_focal_blur_out():
+    """A case whose thin lens would do (focal-blur) decides mesh with an anamorphic lens,
+    saying why in a focal-blur line and the conclusion; a pinhole case stays pinhole (its
+    view is framed per meridian)."""
+    what = "EFL_x 31.49 mm, EFL_y 60.55 mm, squeeze 1.92"
+    fb = next(c for c in CASES if c["decision"]["method"] == "focal-blur")
+    d = decide(**_inputs(fb), anamorphic=what)
+    assert d.method == "mesh" and d.focal_blur is None
+    assert any(r.startswith("focal-blur: cannot draw an anamorphic lens (" + what)
+               for r in d.reasons)
+    assert d.reasons[-1].startswith("-> mesh: the lens is anamorphic")
+    assert d.samples == decide(**_inputs(fb)).numbers["blur_rule_samples"]
+    ph = next(c for c in CASES if c["decision"]["method"] == "pinhole")
+    assert decide(**_inputs(ph), anamorphic=what).method == "pinhole"
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c["case"] for c in CASES])
