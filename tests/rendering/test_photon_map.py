@@ -98,3 +98,19 @@ def test_a_photons_block_povlens_cannot_repeat_leaves_each_sample_its_own(tmp_pa
     assert "photon_settings" not in plan["povray"]
     assert any(n.startswith("photons: povlens cannot repeat") for n in plan["notes"])
     assert "PovlensPhoton" not in (out / "pinhole.pov").read_text()
+
+
+def test_a_scene_that_writes_files_shares_nothing(tmp_path):
+    """A scene that opens a file to write while it is parsed may not be the same scene
+    from run to run: no photon map, no shared radiosity, a note naming the #fopen."""
+    scene = tmp_path / "p.pov"
+    scene.write_text('#fopen Log "log.txt" write\n#write (Log, "run\\n")\n#fclose Log\n'
+                     + PHOTON_SCENE.replace("photons { spacing", "radiosity { count 9 } "
+                                            "photons { spacing"))
+    out = tmp_path / "o"
+    _povlens("convert", scene, *SIZE[:-1], "-o", out)
+    plan = json.loads((out / "plan.json").read_text())
+    assert "photon_settings" not in plan["povray"] and "radiosity_cache" not in plan["povray"]
+    notes = [n for n in plan["notes"] if "writes a file while it is parsed" in n]
+    assert len(notes) == 2 and all(f"{scene}:1" in n for n in notes)
+    assert {n.split(":")[0] for n in notes} == {"radiosity", "photons"}

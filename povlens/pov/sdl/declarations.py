@@ -309,7 +309,9 @@ class Declarations:
                 as_string(ds.expr.parse_string(), "#fopen")
             except SdlEvalError:
                 pass
-            raw.next()  # read / write / append
+            mode = raw.next()  # read / write / append
+            if mode.text in ("write", "append"):
+                ds.written_files.append(tok.where)
             if name.kind == "ident":
                 ds.symbols.declare(name.text, UnknownValue(f"it is a file ({name.where})", kind="file"))
         elif tok.text == "#fclose":

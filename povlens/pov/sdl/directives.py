@@ -79,6 +79,7 @@ class DirectiveStream(FlowDirectives):
         self.loop_tokens = 0
         self._loop_counted = 0  # tokens_read when loop tokens were last counted
         self.used_names: set[str] = set()  # constants read (clock, image_width...)
+        self.written_files: list[str] = []  # "file:line" of each #fopen to write or append
         self.included: list[Path] = []
         self.unread_includes: list[str] = []
         self.on_abandon: Callable[[Frame, str], None] | None = None

@@ -125,6 +125,8 @@ class SceneCamera:
     photon_settings : the items of the scene's last ``photons`` block in
         ``global_settings`` as SDL text a later block can repeat (names replaced by
         their values); "" when povlens cannot repeat it whole; None without one.
+    written_files : ``"file:line"`` of each ``#fopen`` that writes or appends a file
+        while the scene is parsed.
     """
 
     location: np.ndarray
@@ -145,6 +147,7 @@ class SceneCamera:
     replaced: list[str] = dataclasses.field(default_factory=list)
     global_settings: tuple[str, ...] = ()
     photon_settings: str | None = None
+    written_files: tuple[str, ...] = ()
 
 
 def parse_scene_camera(
@@ -210,7 +213,8 @@ def parse_scene_camera(
     found = dataclasses.replace(_world_camera(cam),
                                 replaced=extra + _notes(cam, image_width, image_height),
                                 global_settings=notes.get("global_settings", ()),
-                                photon_settings=notes.get("photon_settings"))
+                                photon_settings=notes.get("photon_settings"),
+                                written_files=notes.get("written_files", ()))
     if files is not None:
         # the folders too: a file added there may shadow an include found elsewhere
         watched = [*files, path.parent, *libs]
@@ -268,7 +272,8 @@ def _read_camera(path: Path, image_width, image_height, libs, clock, declares
     notes: dict = {"used": set(reader.stream.used_names),
                    "files": None if reader.unread_includes else list(reader.included),
                    "global_settings": tuple(sorted(reader.global_settings)),
-                   "photon_settings": reader.photon_settings}
+                   "photon_settings": reader.photon_settings,
+                   "written_files": tuple(reader.written_files)}
     if cam is None:
         if reader.unread_includes:
             raise SceneCameraError(

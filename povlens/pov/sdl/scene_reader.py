@@ -78,6 +78,11 @@ class SceneReader:
         return self.stream.unread_includes
 
     @property
+    def written_files(self) -> list[str]:
+        """``"file:line"`` of each ``#fopen`` that writes or appends, as read."""
+        return self.stream.written_files
+
+    @property
     def included(self) -> list[Path]:
         return self.stream.included
 
