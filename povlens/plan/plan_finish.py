@@ -216,6 +216,10 @@ def _radiosity_cache(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:
     name a radiosity file."""
     if opts.sampling.method != "mesh" or "radiosity" not in st.scene_settings:
         return
+    if st.scene_writes:
+        plan.add_note(f"radiosity: {_WRITES_NOTE.format(where=st.scene_writes[0])} its own "
+                      f"radiosity samples")
+        return
     if any("radiosity_file" in o.lower() or o.lower().lstrip("+-").startswith("rf")
            for o in st.povray.extra_options):
         plan.add_note("radiosity: the POV-Ray options name a radiosity file, so each lens "
@@ -224,6 +228,10 @@ def _radiosity_cache(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:
     plan.povray = dataclasses.replace(plan.povray, radiosity_cache=True)
     plan.add_note(RADIOSITY_CACHE_NOTE)
 
+
+#: Why a scene that writes files while it is parsed shares nothing between lens samples.
+_WRITES_NOTE = ("the scene writes a file while it is parsed (#fopen at {where}), so a run "
+                "may not see the scene another saw; each lens sample computes")
 
 #: What a mesh plan of a scene with photons says it adds.
 PHOTON_MAP_NOTE = (
@@ -236,6 +244,10 @@ def _photon_map(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:
     """Mark a mesh plan of a scene with photons for the shared photon map
     (:mod:`povlens.rendering.photon_map`) when its photons block can be repeated."""
     if opts.sampling.method != "mesh" or "photons" not in st.scene_settings:
+        return
+    if st.scene_writes:
+        plan.add_note(f"photons: {_WRITES_NOTE.format(where=st.scene_writes[0])} its own "
+                      f"photons")
         return
     if not st.scene_photons:
         plan.add_note("photons: povlens cannot repeat the scene's photons block whole (a "

@@ -85,6 +85,7 @@ class PlanStart:
     notes: list[str] = dataclasses.field(default_factory=list)  # Plan.notes of the camera
     scene_settings: tuple[str, ...] = ()   # the items of the scene's global_settings
     scene_photons: str | None = None       # its photons block's items (SceneCamera)
+    scene_writes: tuple[str, ...] = ()     # where it opens files to write (SceneCamera)
     anamorphic: dict | None = None         # Plan.anamorphic (povlens.plan.anamorphic)
 
 
@@ -138,7 +139,8 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
                      povray, camera_notes(cam, proportions) + _framing(cam, film, model, opts)
                      + ana_notes,
                      () if cam is None else tuple(cam.global_settings),
-                     None if cam is None else cam.photon_settings)
+                     None if cam is None else cam.photon_settings,
+                     () if cam is None else tuple(cam.written_files))
     if ana is not None:
         start.anamorphic = anamorphic_record(ana, model, film, opts.film.desqueeze)
     return start
