@@ -18,7 +18,7 @@ from povlens.lens.film import Film
 from povlens.lens.focus import BUNDLE_START_MM, pupil_disc_points
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_scene
-from povlens.thinlens.model import EquivalentThinLens
+from povlens.thinlens.model import EquivalentThinLens, chief_rays_2d
 
 __all__ = ["ModelError", "measure_model_error", "measure_model_error_reference", "rays_near_lens",
            "CHIEF_RAY_MEMO"]
@@ -139,11 +139,17 @@ def _bundle_geometry(lens, film_distance_mm, model, film, object_z_mm, n_field, 
     disc = pupil_disc_points(n_rings) * (0.75 * max(model.pupil_diameter_mm,
                                                     model.pupil_diameter_x_mm or 0.0))
     ep_z = model.centre_z_mm
-    chief, found = _chief_rays_remembered(lens, film_distance_mm, hs)
+    if model.anamorphic:        # no rotational symmetry: the chief rays of the diagonal
+        chief, found = chief_rays_2d(lens, film_distance_mm, -hs[:, None] * diag_dir[None, :])
+    else:
+        chief, found = _chief_rays_remembered(lens, film_distance_mm, hs)
     with np.errstate(all="ignore"):
         t = (ep_z - chief.origin_mm[:, 2]) / chief.direction[:, 2]
-        x_c = chief.origin_mm[:, 0] + t * chief.direction[:, 0]
-    x_c = np.where(found & np.isfinite(x_c), x_c, 0.0)
+        c = chief.origin_mm[:, :2] + t[:, None] * chief.direction[:, :2]
+    if model.anamorphic:
+        return pitch, depths, hs, diag_dir, disc, ep_z, np.where(
+            (found[:, None] & np.isfinite(c)), c, 0.0)
+    x_c = np.where(found & np.isfinite(c[:, 0]), c[:, 0], 0.0)
     centres = -x_c[:, None] * diag_dir[None, :]
     return pitch, depths, hs, diag_dir, disc, ep_z, centres
 
