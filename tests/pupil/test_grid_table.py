@@ -246,3 +246,20 @@ def test_frame_extent_and_bad_arguments():
             build_grid_pupil_table(lens, fd, bad)
     with pytest.raises(ParameterError):
         build_grid_pupil_table(lens, fd, (12.0, 9.0), n_angles=30)
+
+
+def test_plot_and_the_pupil_command_take_a_grid_table(tmp_path, capsys):
+    """`povlens pupil` on an anamorphic lens file builds the grid table, compares it and
+    draws its regions at film points along the frame's diagonal (no traceback)."""
+    from povlens.cli import main
+    from povlens.lens.prescription import write_lens
+    from povlens.pupil.plot import plot_pupil_shapes
+    lens, fd, table = anamorphic("2004")
+    png = plot_pupil_shapes(table, tmp_path / "p.png", film_radii=[0.0, 7.0, 14.0], n_grid=48)
+    assert png.stat().st_size > 1000
+    path = tmp_path / "a.dat"
+    write_lens(lens, path)
+    rc = main(["pupil", str(path), "--focus", "5000", "--film-diagonal", "10", "--no-compare",
+               "--tolerance", "0.02", "--samples", "256"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "grid of film points over x and y (anamorphic lens)" in out
