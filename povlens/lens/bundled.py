@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from povlens.lens.chief_ray import chief_rays
+from povlens.lens.chief_ray import chief_rays, chief_rays_2d
 from povlens.lens.film import DEFAULT_FILM_DIAGONAL_MM
-from povlens.lens.paraxial import paraxial_data
+from povlens.lens.paraxial import anamorphic_data, paraxial_data
 from povlens.lens.prescription import LensPrescription, read_lens
 from povlens.util.resources import LENS_DIR
 
@@ -123,11 +123,31 @@ def lens_sources(sources_md: str | Path) -> dict[str, tuple[str, str]]:
     return out
 
 
+#: The image's proportions the field of view is given for (4:3, 640x480's); an
+#: anamorphic lens's film takes them over its squeeze, as a desqueezed render's does.
+IMAGE_ASPECT = 4.0 / 3.0
+
+
+def _corner_direction(lens: LensPrescription) -> np.ndarray:
+    """Unit film direction (x, y) of the film corner: along x for a rotationally
+    symmetric lens (any azimuth is the same), else toward the corner of a film of
+    proportions :data:`IMAGE_ASPECT` / squeeze (povlens's desqueezed film)."""
+    if not lens.is_anamorphic:
+        return np.array([1.0, 0.0])
+    aspect = IMAGE_ASPECT / anamorphic_data(lens).squeeze
+    return np.array([aspect, 1.0]) / math.hypot(aspect, 1.0)
+
+
 def _chief_ray_angle_deg(lens: LensPrescription, film_distance_mm: float,
                          r_mm: float) -> float | None:
-    """Object-space angle (degrees) of the chief ray from film radius ``r_mm``; None if
-    it does not get through the lens's clear apertures."""
-    rays, found = chief_rays(lens, film_distance_mm, np.array([r_mm]))
+    """Object-space angle (degrees) of the chief ray from the film point ``r_mm`` from
+    the centre toward the corner (:func:`_corner_direction`); None if it does not get
+    through the lens's clear apertures."""
+    if lens.is_anamorphic:
+        rays, found = chief_rays_2d(lens, film_distance_mm,
+                                    (r_mm * _corner_direction(lens))[None, :])
+    else:
+        rays, found = chief_rays(lens, film_distance_mm, np.array([r_mm]))
     d = rays.direction[0]
     if not (found[0] and rays.passed[0] and np.all(np.isfinite(d)) and d[2] > 0):
         return None
@@ -156,6 +176,10 @@ def diagonal_field_of_view_deg(lens: LensPrescription,
         None when the image covers the film corner; else the diameter of the image
         circle (twice the largest film radius whose chief ray gets through the clear
         apertures, to 0.01 %).
+
+    An anamorphic lens's corner is that of a film of the diagonal and of proportions
+    4:3 over its squeeze, the film a desqueezed 4:3 render uses (so the angle is the
+    picture's diagonal), focused at its y meridian's paraxial focus.
     """
     p = paraxial_data(lens)
     half = 0.5 * film_diagonal_mm

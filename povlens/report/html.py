@@ -47,6 +47,7 @@ from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, read_plan
 from povlens.report import DEFAULT_REPORT
 from povlens.pupil.plot import plot_pupil_shapes
+from povlens.pupil.grid_table import frame_extent_mm
 from povlens.pupil.storage import cached_pupil_table
 from povlens.rendering.folder_composite import composite_outdir
 from povlens.rendering.folder_inputs import lens_for
@@ -351,7 +352,7 @@ class _Folder:
         fd = self.plan.focus.film_distance_mm
         hd = self.film.max_field_radius_mm            # a shifted frame's farthest corner
         table, reused = cached_pupil_table(RenderFolder(self.dir).pupil_npz, self.lens, fd, hd,
-                                           save=False)
+                                           save=False, film_extent_mm=frame_extent_mm(self.film))
         if not reused:
             self.timings.append(("exit-pupil table (built for this report)",
                                  table.stats["build_time_s"], ""))

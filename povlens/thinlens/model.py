@@ -37,13 +37,12 @@ import math
 
 import numpy as np
 
-from povlens.lens.chief_ray import chief_rays
+from povlens.lens.chief_ray import chief_rays, chief_rays_2d
 from povlens.lens.film import Film
 from povlens.lens.paraxial import paraxial_data
 from povlens.lens.prescription import LensPrescription
-from povlens.lens.tracer import trace_from_film
 
-__all__ = ["EquivalentThinLens", "fit_thin_lens", "chief_ray_tangents_y", "chief_rays_2d"]
+__all__ = ["EquivalentThinLens", "fit_thin_lens", "chief_ray_tangents_y"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,56 +119,6 @@ def _fitted_image_distance(h: np.ndarray, t: np.ndarray) -> tuple[float, float]:
     """Least squares h = v t over film heights h (mm) and tangents t: (v, rms mm)."""
     v = float(np.sum(h * h) / np.sum(h * t))
     return v, float(np.sqrt(np.mean((h - v * t) ** 2)))
-
-
-def chief_rays_2d(lens: LensPrescription, film_distance_mm: float, film_xy):
-    """Real chief rays from film points anywhere on the film (f_x, f_y, 0) through the
-    centre of the (y-z meridian's) stop, for lenses that are not rotationally symmetric.
-
-    The aim (a_x, a_y) on the rear-vertex plane is found by the secant method in each
-    coordinate so that the ray's height at the stop is (0, 0) (a mirror-symmetric lens's
-    two meridians decouple to first order, so each coordinate of the aim drives its
-    own coordinate of the stop height); every clear aperture is opened while aiming, as
-    :func:`povlens.lens.chief_ray.chief_ray_aim_mm` does along x.  Then the ray is traced
-    through the whole lens.
-
-    Parameters
-    ----------
-    lens, film_distance_mm : the lens and its rear-vertex-to-film distance (mm).
-    film_xy : (n, 2) film points, mm.
-
-    Returns
-    -------
-    rays : the :class:`~povlens.lens.tracer.TraceResult` of the n rays (leaving the front
-        surface); ``passed`` tells whether the chief ray gets through every aperture.
-    found : (n,) bool, True where the aim converged to within 1e-9 mm at the stop.
-    """
-    p = paraxial_data(lens)
-    f = np.asarray(film_xy, dtype=np.float64).reshape(-1, 2)
-    n = len(f)
-    wide = lens.replace(aperture_diameter_mm=np.full(lens.n_surfaces, 1e6),
-                        aperture_shape=None, aperture_shape_row=-1)
-    to_stop = wide.sub_lens(p.stop_index)
-    origin = np.column_stack([f, np.zeros(n)])
-
-    def rays(aim, through):
-        d = np.column_stack([aim - f, np.full(n, float(film_distance_mm))])
-        return trace_from_film(through, film_distance_mm, origin, d)
-
-    z_xp = film_distance_mm - p.exit_pupil_position
-    a0 = f * (1.0 - film_distance_mm / z_xp) if z_xp != 0 else np.zeros_like(f)
-    a1 = a0 + 1e-3 * max(1.0, float(np.abs(f).max()) if n else 1.0)
-    t0, t1 = rays(a0, to_stop), rays(a1, to_stop)
-    for _ in range(40):
-        h0, h1 = t0.origin_mm[:, :2], t1.origin_mm[:, :2]
-        ok = (t0.passed & t1.passed)[:, None] & (h1 != h0)
-        a2 = np.where(ok, a1 - h1 * (a1 - a0) / np.where(h1 != h0, h1 - h0, 1.0), a1)
-        a0, t0, a1 = a1, t1, a2
-        t1 = rays(a1, to_stop)
-        if np.all(~t1.passed | np.all(np.abs(t1.origin_mm[:, :2]) < 1e-12, axis=1)):
-            break
-    found = t1.passed & np.all(np.abs(t1.origin_mm[:, :2]) < 1e-9, axis=1)
-    return rays(a1, lens), found
 
 
 def chief_ray_tangents_y(lens: LensPrescription, film_distance_mm: float,

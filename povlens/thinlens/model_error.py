@@ -13,12 +13,12 @@ from typing import Mapping
 
 import numpy as np
 
-from povlens.lens.chief_ray import chief_rays
+from povlens.lens.chief_ray import chief_rays, chief_rays_2d
 from povlens.lens.film import Film
 from povlens.lens.focus import BUNDLE_START_MM, pupil_disc_points
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.tracer import trace_from_scene
-from povlens.thinlens.model import EquivalentThinLens, chief_rays_2d
+from povlens.thinlens.model import EquivalentThinLens
 
 __all__ = ["ModelError", "measure_model_error", "measure_model_error_reference", "rays_near_lens",
            "CHIEF_RAY_MEMO"]

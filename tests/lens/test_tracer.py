@@ -24,6 +24,7 @@ FILM_MM = {
     "dgauss.dat": 2.0 * 36.1059, "wide.dat": 14.3182 * 100.0 / 22.0,
     # paraxial back focal distances, y-nu trace (tests/lens/import_reference.trace)
     "angenieux.100mm.dat": 55.9771, "aspheric.31mm.dat": 21.4472,
+    "anamorphic.60mm.dat": 43.3545,     # its y-z meridian's
 }
 
 

@@ -8,7 +8,7 @@ import zlib
 import numpy as np
 import pytest
 
-from conftest import SHIPPED_LENSES
+from conftest import ROUND_LENSES
 from povlens.errors import OpticsError, PovlensError, UsageError
 from povlens.lens.focus import thick_lens_film_distance_mm
 from povlens.lens.paraxial import paraxial_data, stopped_down
@@ -28,7 +28,7 @@ HALF_DIAGONAL = 17.5  # 35 mm film diagonal
 def tables():
     """Every shipped lens focused at 10 m (thick lens), stop as in the file."""
     out = {}
-    for name in SHIPPED_LENSES:
+    for name in ROUND_LENSES:
         lens = read_lens(name)
         fd = thick_lens_film_distance_mm(lens, 10_000.0)
         out[name] = build_pupil_table(lens, fd, HALF_DIAGONAL)
@@ -47,10 +47,10 @@ def brute_force(table, r, n=300):
 
 
 def test_shipped_lenses_are_all_covered():
-    assert len(SHIPPED_LENSES) >= 9
+    assert len(ROUND_LENSES) >= 9
 
 
-@pytest.mark.parametrize("name", SHIPPED_LENSES)
+@pytest.mark.parametrize("name", ROUND_LENSES)
 def test_table_contains_every_ray_that_passes(tables, name):
     """Dense brute-force tracing at many film radii (knots, between knots, random):
     no passing ray lies outside the table's region."""
@@ -71,7 +71,7 @@ def test_table_contains_every_ray_that_passes(tables, name):
     assert total > 10_000  # the grids did find the pupil
 
 
-@pytest.mark.parametrize("name", SHIPPED_LENSES)
+@pytest.mark.parametrize("name", ROUND_LENSES)
 def test_pass_fraction_at_least_95_percent_everywhere(tables, name):
     t = tables[name]
     radii = np.linspace(0.0, HALF_DIAGONAL, 25)
