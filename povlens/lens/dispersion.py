@@ -122,8 +122,8 @@ def dispersion_model(lens: LensPrescription) -> str:
     if named:
         parts.append("catalogue formulas (secondary spectrum): " + ", ".join(named))
     if cauchy:
-        parts.append(f"Cauchy from n_d and V_d: row{'s' if len(cauchy) > 1 else ''} "
-                     + ", ".join(cauchy))
+        parts.append(f"Cauchy n = A + B/lambda^2 through n_d and n_F - n_C = (n_d - 1)/V_d: "
+                     f"row{'s' if len(cauchy) > 1 else ''} " + ", ".join(cauchy))
     return "; ".join(parts) or "no glass"
 
 

@@ -25,8 +25,7 @@ from povlens.pupil.band_table import band_dilation
 __all__ = ["apply_dispersion", "colour_decision", "COLOUR_MODEL"]
 
 #: How the samples' wavelengths become RGB (plan.json; povlens.rendering.spectral).
-COLOUR_MODEL = ("Cauchy n = A + B/lambda^2 through n_d and n_F - n_C = (n_d - 1)/V_d; "
-                "wavelengths importance-sampled over the band from the CIE 1931 2-degree "
+COLOUR_MODEL = ("wavelengths importance-sampled over the band from the CIE 1931 2-degree "
                 "colour-matching functions in linear sRGB (negative lobes clipped), "
                 "normalised per channel")
 

@@ -70,7 +70,21 @@ def test_dispersion_follows_the_catalogue_formula_not_cauchy():
     assert abs(cauchy_g - NBK7_SHEET[G_NM]) > 3e-5
     assert "catalogue formulas (secondary spectrum): row 0 SCHOTT:N-BK7" in dispersion_model(lens)
     cauchy = parse_lens_text(SINGLET.replace("#!glass N-BK7", "64.17"), "c.dat")
-    assert dispersion_model(cauchy) == "Cauchy from n_d and V_d: row 0"
+    assert dispersion_model(cauchy) == ("Cauchy n = A + B/lambda^2 through n_d and "
+                                        "n_F - n_C = (n_d - 1)/V_d: row 0")
+
+
+def test_the_plan_of_an_all_catalogue_lens_names_no_cauchy(tmp_path):
+    """angenieux.100mm names a catalogue glass on every glass row: plan.json's
+    dispersion model is the catalogue formulas only."""
+    from conftest import ROOT
+    from povlens.api import convert
+    plan = convert(ROOT / "scenes" / "cards.pov", lens="angenieux.100mm",
+                   outdir=tmp_path / "o", focus=2.1, width=48, height=36, method="mesh",
+                   samples=4, dispersion=True)
+    model = plan.dispersion["model"]
+    assert model.startswith("catalogue formulas (secondary spectrum): row 0 SCHOTT:SF5")
+    assert "Cauchy" not in model
 
 
 def test_a_stated_index_keeps_its_value_and_takes_the_glass_dispersion():
