@@ -203,7 +203,7 @@ class RenderFolder:
     @property
     def radiosity_choice(self) -> Path:
         """Whether the lens samples share :meth:`radiosity_cache`, measured on two
-        samples (:func:`povlens.rendering.radiosity_cache.record_probe`)."""
+        samples (:func:`povlens.rendering.radiosity_cache.record_probes`)."""
         return self.path / "radiosity.json"
 
     @property

@@ -52,9 +52,10 @@ from povlens.rendering.pixel_sampler import pixel_sampler
 from povlens.util.files import write_text
 from povlens.util.images import write_exr
 from povlens.rendering.photon_map import photon_load_args, photon_map_for
-from povlens.rendering.radiosity_cache import (STATISTICS_SWITCHES, probes_missing,
+from povlens.rendering.radiosity_cache import (STATISTICS_SWITCHES, choice_from,
+                                               probe_measurement, probes_missing,
                                                radiosity_cache_for, radiosity_read_args,
-                                               record_probe, sharing_chosen)
+                                               record_probes, sharing_chosen)
 from povlens.util.signals import interrupts_deferred
 
 __all__ = ["render_samples", "render_batch", "sample_rows", "film_row_args",
@@ -175,6 +176,7 @@ class _SampleRenders:
         self.photons = photon_load_args(photon_map_for(plan, outdir))    # shot once
         self.radiosity: list[str] = []
         self.probes: dict[int, str] = {}            # sample -> "own" / "shared", running
+        self.measured: dict[str, dict] = {}         # kind -> its finished measurement
         self.choosing = plan.povray.radiosity_cache and sharing_chosen(outdir) is None
         if not self.choosing:
             self.radiosity = radiosity_read_args(radiosity_cache_for(plan, outdir),
@@ -182,18 +184,39 @@ class _SampleRenders:
 
     def _radiosity_args(self, k: int) -> list[str]:
         """Sample k's radiosity switches; while choosing, a probe's (module doc of
-        :mod:`povlens.rendering.radiosity_cache`), after waiting for the probes when
+        :mod:`povlens.rendering.radiosity_cache`), after waiting for the choice when
         both measurements are running."""
         while self.choosing:
             kinds = [p for p in probes_missing(self.folder.path)
-                     if p not in self.probes.values()]
+                     if p not in self.probes.values() and p not in self.measured]
             if kinds:
                 self.probes[k] = kinds[0]
-                cache = radiosity_cache_for(self.plan, self.folder.path) \
+                cache = radiosity_cache_for(self.plan, self.folder.path, threads=1) \
                     if kinds[0] == "shared" else None
                 return [*radiosity_read_args(cache, self.samples), *STATISTICS_SWITCHES]
-            self._reap(block=True)
+            self._reap(block=False)
+            if self.choosing and not self._settle(final=False):
+                time.sleep(0.01)
         return self.radiosity
+
+    def _settle(self, final: bool) -> bool:
+        """Choose if the probes' measurements decide (the running ones' elapsed times as
+        lower bounds); record them when deciding or ``final`` (a probe just finished).
+        Returns whether the choice is made."""
+        now = time.perf_counter()
+        m = dict(self.measured)
+        for k, kind in self.probes.items():
+            if k in self.running:
+                m[kind] = probe_measurement(k, now - self.running[k][2])
+        if choice_from(m) is None and not final:
+            return False
+        share = record_probes(self.folder.path, m)
+        if share is None:
+            return False
+        self.choosing = False
+        cache = radiosity_cache_for(self.plan, self.folder.path) if share else None
+        self.radiosity = radiosity_read_args(cache, self.samples)
+        return True
 
     def start(self, k: int) -> None:
         while len(self.running) >= self.limit:
@@ -264,12 +287,10 @@ class _SampleRenders:
         os.replace(out, self.folder.sample_image(k))
         kind = self.probes.pop(k, None)
         if kind is not None and self.choosing:
-            share = record_probe(self.folder.path, kind,
-                                 (tmp / "stderr.txt").read_text(errors="replace"), k)
-            if share is not None:
-                self.choosing = False
-                cache = radiosity_cache_for(self.plan, self.folder.path) if share else None
-                self.radiosity = radiosity_read_args(cache, self.samples)
+            self.measured[kind] = probe_measurement(
+                k, time.perf_counter() - self.running[k][2],
+                (tmp / "stderr.txt").read_text(errors="replace"))
+            self._settle(final=True)
 
     def finish(self) -> None:
         while self.running:

@@ -24,15 +24,16 @@ traces in 1.3 s computing its own radiosity, 2.3 s reading the file), while
 ``radiosity/cornell.pov``'s sample drops from 2.54 s to 1.05 s with the file. POV-Ray's
 "Radiosity Time" alone does not tell (patio-radio's sample spends 0.43 s in it and 3.9 s
 tracing, yet gains from the file: samples computed during the final trace count as
-trace time). So a render that has not chosen yet renders its first lens sample with its
-own radiosity and its second reading the shared samples, both with POV-Ray's statistics
-(``+GS``), and the cheaper in radiosity and trace time decides for the rest
-(:func:`record_probe`); ``radiosity.json`` keeps the numbers and the choice for every
-later batch (a batch of one sample records its measurement for the next). The pinhole
-render that saves the samples is a quarter of the image's size each way
-(:data:`CACHE_RENDER_SCALE`): the pretrace's samples are as many (cornell 3.0 s at 80x60
-against 4.6 s at 320x240, the file the same size), and a lens sample reading them takes
-1.88 s against 1.80 s.
+trace time). So a render that has not chosen yet renders one lens sample with its own
+radiosity and one reading the shared samples (made meanwhile on one thread, beside the
+first), side by side, and the faster, wall clock, decides for the rest
+(:func:`choice_from`): as soon as one has finished and the other has already taken
+longer, or when both have. ``radiosity.json`` keeps the measurements (with POV-Ray's
+phase times, ``+GS``) and the choice for every later batch; a batch that renders one
+probe records it for the next. The pinhole render that saves the samples is a quarter of
+the image's size each way (:data:`CACHE_RENDER_SCALE`): the pretrace's samples are as
+many (cornell 3.0 s at 80x60 against 4.6 s at 320x240, the file the same size), and a
+lens sample reading them takes 1.88 s against 1.80 s.
 """
 
 from __future__ import annotations
@@ -50,7 +51,8 @@ from povlens.pov.process import render as povray_render
 from povlens.util.files import temporary_path, write_text
 
 __all__ = ["radiosity_cache_for", "radiosity_read_args", "sharing_chosen", "probes_missing",
-           "record_probe", "PROBES", "STATISTICS_SWITCHES", "CACHE_RENDER_SCALE"]
+           "choice_from", "probe_measurement", "record_probes", "PROBES",
+           "STATISTICS_SWITCHES", "CACHE_RENDER_SCALE"]
 
 #: The two measurements the choice compares: a lens sample computing its own radiosity,
 #: and one reading the shared samples.
@@ -64,7 +66,8 @@ STATISTICS_SWITCHES = ("+GS",)
 _PHASE_S = r"{}:[^(\n]*\(([0-9.]+) seconds\)"
 
 
-def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
+def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike,
+                        threads: int | None = None) -> Path | None:
     """The folder's radiosity samples, made now if the plan shares them and they are
     missing; None when the plan does not share them.
 
@@ -72,6 +75,8 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     ----------
     plan : the folder's plan.
     outdir : the render folder.
+    threads : POV-Ray's threads for that render (default all cores; one while a probe
+        computing its own radiosity runs beside it, so as not to slow it).
 
     Returns
     -------
@@ -93,7 +98,7 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
             for n in (plan.film.width_px, plan.film.height_px))
     try:
         povray_render(folder.wrapper("pinhole"), image, w, h,
-                      threads=os.cpu_count() or 1,
+                      threads=threads or os.cpu_count() or 1,
                       library_paths=[Path(plan.inputs.scene).parent],
                       povray_options=povray_options_of(plan.inputs),
                       extra_args=[f"Radiosity_File_Name={tmp.name}", "+RFO"])
@@ -124,7 +129,7 @@ def _record(outdir) -> dict:
 
 def sharing_chosen(outdir: str | os.PathLike) -> bool | None:
     """Whether the lens samples of the folder share the radiosity samples, as
-    :func:`record_probe` chose it; None when not chosen yet."""
+    :func:`record_probes` chose it; None when not chosen yet."""
     share = _record(outdir).get("share")
     return share if isinstance(share, bool) else None
 
@@ -144,32 +149,57 @@ def _phase_seconds(statistics: str, phase: str) -> float:
     return float(m.group(1)) if m else 0.0
 
 
-def record_probe(outdir: str | os.PathLike, kind: str, statistics: str,
-                 sample: int) -> bool | None:
-    """Record what a probing lens sample measured, and choose once both are there.
+def choice_from(measurements: dict) -> bool | None:
+    """The choice from the probes' measurements: {kind: {"wall_s", "finished", ...}}.
 
-    Parameters
-    ----------
-    outdir : the render folder.
-    kind : ``"own"`` or ``"shared"`` (:data:`PROBES`).
-    statistics : what the sample's POV-Ray printed with :data:`STATISTICS_SWITCHES`.
-    sample : its number (recorded).
+    True (share) when the sample reading the shared samples took no longer, wall clock,
+    than the one computing its own; decided as soon as one has finished and the other,
+    still running, has already taken longer; None while that is not known.
+    """
+    own, shared = measurements.get("own"), measurements.get("shared")
+    if not (isinstance(own, dict) and isinstance(shared, dict)):
+        return None
+    own_done, shared_done = bool(own.get("finished")), bool(shared.get("finished"))
+    if own_done and shared_done:
+        return shared["wall_s"] <= own["wall_s"]
+    if shared_done and own["wall_s"] >= shared["wall_s"]:
+        return True
+    if own_done and shared["wall_s"] > own["wall_s"]:
+        return False
+    return None
+
+
+def probe_measurement(sample: int, wall_s: float, statistics: str | None = None) -> dict:
+    """A probe's record: its sample, wall time (s) and, once finished (``statistics``:
+    what its POV-Ray printed with :data:`STATISTICS_SWITCHES`), POV-Ray's radiosity and
+    trace times; without statistics it is still running and ``wall_s`` a lower bound."""
+    m = {"sample": int(sample), "wall_s": round(float(wall_s), 4),
+         "finished": statistics is not None}
+    if statistics is not None:
+        m["radiosity_s"] = _phase_seconds(statistics, "Radiosity Time")
+        m["trace_s"] = _phase_seconds(statistics, "Trace Time")
+    return m
+
+
+def record_probes(outdir: str | os.PathLike, measurements: dict) -> bool | None:
+    """Merge probe measurements ({kind: :func:`probe_measurement`}) into
+    ``radiosity.json`` (a finished one is never replaced by a running one) and record the
+    choice once :func:`choice_from` makes it.
 
     Returns
     -------
     bool or None
-        The choice (``radiosity.json``'s ``share``): True when the sample that read the
-        shared samples took no longer in radiosity and tracing ("Radiosity Time" +
-        "Trace Time") than the one computing its own; None while one is missing.
+        The choice, None while it is not made.
     """
     rec = _record(outdir)
-    rec[kind] = {"sample": int(sample),
-                 "radiosity_s": _phase_seconds(statistics, "Radiosity Time"),
-                 "trace_s": _phase_seconds(statistics, "Trace Time")}
-    if all(isinstance(rec.get(k), dict) for k in PROBES):
-        own, shared = (rec[k]["radiosity_s"] + rec[k]["trace_s"] for k in PROBES)
-        rec["share"] = shared <= own
+    for kind, m in measurements.items():
+        old = rec.get(kind)
+        if not (isinstance(old, dict) and old.get("finished") and not m.get("finished")):
+            rec[kind] = m
+    share = choice_from(rec)
+    if share is not None:
+        rec["share"] = share
         rec["rule"] = ("share when a lens sample reading the shared samples takes no longer "
-                       "in radiosity and tracing than one computing its own")
+                       "(wall clock) than one computing its own radiosity")
     write_text(RenderFolder(outdir).radiosity_choice, json.dumps(rec) + "\n")
-    return rec.get("share")
+    return share

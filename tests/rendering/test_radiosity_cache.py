@@ -82,17 +82,21 @@ def test_a_scene_without_radiosity_renders_as_before(tmp_path):
 
 
 def test_two_samples_measure_whether_sharing_pays(tmp_path):
-    """Sample 0 renders with its own radiosity, sample 1 reading the shared samples, both
-    with POV-Ray's statistics; radiosity.json records both and the cheaper decides."""
+    """Sample 0 renders with its own radiosity, sample 1 reading the shared samples, side
+    by side; radiosity.json records both (wall clock; POV-Ray's phase times for a finished
+    one) and the choice they make."""
+    from povlens.rendering.radiosity_cache import choice_from
     scene = tmp_path / "rad.pov"
     scene.write_text(RADIOSITY_SCENE)
     out = tmp_path / "o"
     _povlens("render", scene, *SIZE, "-o", out)
     rec = json.loads((out / "radiosity.json").read_text())
     assert rec["own"]["sample"] == 0 and rec["shared"]["sample"] == 1
-    assert rec["own"]["radiosity_s"] > 0 and rec["own"]["trace_s"] >= 0
-    own, shared = (rec[k]["radiosity_s"] + rec[k]["trace_s"] for k in ("own", "shared"))
-    assert rec["share"] is (shared <= own)
+    assert rec["own"]["wall_s"] > 0 and rec["shared"]["wall_s"] > 0
+    assert rec["own"]["finished"] or rec["shared"]["finished"]
+    done = rec["own"] if rec["own"]["finished"] else rec["shared"]
+    assert done["radiosity_s"] >= 0 and done["trace_s"] >= 0
+    assert isinstance(rec["share"], bool) and choice_from(rec) is rec["share"]
     assert (out / "radiosity.rca").is_file()        # made for the shared probe
     assert read_image(out / "image.exr")[..., :3].mean() > 0.05
 
@@ -114,20 +118,32 @@ def test_a_recorded_choice_is_followed(tmp_path, share):
     assert read_image(out / "image.exr")[..., :3].mean() > 0.05
 
 
-def test_the_choice_from_povray_statistics(tmp_path):
-    from povlens.rendering.radiosity_cache import probes_missing, record_probe, sharing_chosen
+def test_the_choice_from_the_probes_measurements(tmp_path):
+    """Both finished: the faster decides; one finished and the other, still running,
+    already slower: decided early; otherwise not yet. A finished measurement is never
+    replaced by a running one, and a damaged record is measured again."""
+    from povlens.rendering.radiosity_cache import (choice_from, probe_measurement,
+                                                   probes_missing, record_probes,
+                                                   sharing_chosen)
     stats = ("Render Time:\n  Photon Time:      No photons\n"
              "  Radiosity Time:   0 hours  0 minutes  1 seconds (1.392 seconds)\n"
              "  Trace Time:       0 hours  0 minutes  1 seconds (1.149 seconds)\n")
+    own = probe_measurement(0, 3.24, stats)                    # cornell's sample, by hand
+    assert own == {"sample": 0, "wall_s": 3.24, "finished": True, "radiosity_s": 1.392,
+                   "trace_s": 1.149}
+    assert choice_from({"own": own}) is None
+    assert choice_from({"own": own, "shared": probe_measurement(1, 1.80, "")}) is True
+    assert choice_from({"own": own, "shared": probe_measurement(1, 3.5, "")}) is False
+    assert choice_from({"own": own, "shared": probe_measurement(1, 2.0)}) is None
+    assert choice_from({"own": own, "shared": probe_measurement(1, 3.3)}) is False   # early
+    assert choice_from({"own": probe_measurement(0, 2.5),
+                        "shared": probe_measurement(1, 1.8, "")}) is True          # early
     assert sharing_chosen(tmp_path) is None and probes_missing(tmp_path) == ["own", "shared"]
-    assert record_probe(tmp_path, "own", stats, 0) is None       # one measurement: no choice
+    assert record_probes(tmp_path, {"own": own}) is None         # one measurement: no choice
     assert probes_missing(tmp_path) == ["shared"] and sharing_chosen(tmp_path) is None
-    faster = stats.replace("(1.392", "(0.106").replace("(1.149", "(0.943")
-    assert record_probe(tmp_path, "shared", faster, 1) is True   # cornell's numbers
+    assert record_probes(tmp_path, {"own": probe_measurement(0, 9.0)}) is None
+    assert json.loads((tmp_path / "radiosity.json").read_text())["own"] == own   # kept
+    assert record_probes(tmp_path, {"shared": probe_measurement(1, 1.8, stats)}) is True
     assert sharing_chosen(tmp_path) is True and probes_missing(tmp_path) == []
-    (tmp_path / "radiosity.json").unlink()
-    record_probe(tmp_path, "own", stats.replace("(1.392", "(0.129").replace("(1.149", "(1.312"), 0)
-    slower = stats.replace("(1.392", "(0.043").replace("(1.149", "(2.297")
-    assert record_probe(tmp_path, "shared", slower, 1) is False  # gamma_showcase's
     (tmp_path / "radiosity.json").write_text("{broken")
     assert sharing_chosen(tmp_path) is None and probes_missing(tmp_path) == ["own", "shared"]
