@@ -190,10 +190,14 @@ class _SampleRenders:
             kinds = [p for p in probes_missing(self.folder.path)
                      if p not in self.probes.values() and p not in self.measured]
             if kinds:
+                # the file first, on every core: then the two probes start together, and
+                # the first to finish has won (the other has taken as long already)
+                cache = radiosity_cache_for(self.plan, self.folder.path) \
+                    if "shared" in kinds else None
                 self.probes[k] = kinds[0]
-                cache = radiosity_cache_for(self.plan, self.folder.path, threads=1) \
-                    if kinds[0] == "shared" else None
-                return [*radiosity_read_args(cache, self.samples), *STATISTICS_SWITCHES]
+                args = radiosity_read_args(cache if kinds[0] == "shared" else None,
+                                           self.samples)
+                return [*args, *STATISTICS_SWITCHES]
             self._reap(block=False)
             if self.choosing and not self._settle(final=False):
                 time.sleep(0.01)

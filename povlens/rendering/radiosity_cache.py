@@ -24,16 +24,16 @@ traces in 1.3 s computing its own radiosity, 2.3 s reading the file), while
 ``radiosity/cornell.pov``'s sample drops from 2.54 s to 1.05 s with the file. POV-Ray's
 "Radiosity Time" alone does not tell (patio-radio's sample spends 0.43 s in it and 3.9 s
 tracing, yet gains from the file: samples computed during the final trace count as
-trace time). So a render that has not chosen yet renders one lens sample with its own
-radiosity and one reading the shared samples (made meanwhile on one thread, beside the
-first), side by side, and the faster, wall clock, decides for the rest
-(:func:`choice_from`): as soon as one has finished and the other has already taken
-longer, or when both have. ``radiosity.json`` keeps the measurements (with POV-Ray's
+trace time). So a render that has not chosen yet makes the shared samples first, then
+renders one lens sample with its own radiosity and one reading them, side by side, and
+the faster, wall clock, decides for the rest (:func:`choice_from`): the first to finish,
+since the other has then taken as long already (or, across batches, when both have). ``radiosity.json`` keeps the measurements (with POV-Ray's
 phase times, ``+GS``) and the choice for every later batch; a batch that renders one
-probe records it for the next. The pinhole render that saves the samples is a quarter of
-the image's size each way (:data:`CACHE_RENDER_SCALE`): the pretrace's samples are as
-many (cornell 3.0 s at 80x60 against 4.6 s at 320x240, the file the same size), and a
-lens sample reading them takes 1.88 s against 1.80 s.
+probe records it for the next. The pinhole render that saves the samples is the image's size
+(:data:`CACHE_RENDER_SCALE` 1): a quarter-size one is cheaper (cornell 3.0 s at 80x60
+against 4.6 s at 320x240, its samples then 1.88 s against 1.80 s), but balcony's samples
+trace 6.8 s reading a quarter-size one against 4.8 s reading a full one (36.3 s against
+40.9 s for the render).
 """
 
 from __future__ import annotations
@@ -58,16 +58,15 @@ __all__ = ["radiosity_cache_for", "radiosity_read_args", "sharing_chosen", "prob
 #: and one reading the shared samples.
 PROBES = ("own", "shared")
 #: The pinhole render saving the samples is this many times smaller each way than the
-#: image (at least :data:`CACHE_RENDER_MIN_PX` pixels each way).
-CACHE_RENDER_SCALE = 4
+#: image (at least :data:`CACHE_RENDER_MIN_PX` pixels each way; module doc).
+CACHE_RENDER_SCALE = 1
 CACHE_RENDER_MIN_PX = 32
 #: POV-Ray switches after povlens's quiet ones that print the statistics (to stderr).
 STATISTICS_SWITCHES = ("+GS",)
 _PHASE_S = r"{}:[^(\n]*\(([0-9.]+) seconds\)"
 
 
-def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike,
-                        threads: int | None = None) -> Path | None:
+def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     """The folder's radiosity samples, made now if the plan shares them and they are
     missing; None when the plan does not share them.
 
@@ -75,14 +74,13 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike,
     ----------
     plan : the folder's plan.
     outdir : the render folder.
-    threads : POV-Ray's threads for that render (default all cores; one while a probe
-        computing its own radiosity runs beside it, so as not to slow it).
 
     Returns
     -------
     Path or None
         ``RenderFolder(outdir).radiosity_cache``; made by one pinhole render of the
-        folder's ``pinhole.pov`` at a quarter of the image's size each way, all cores.
+        folder's ``pinhole.pov`` at the image's size (:data:`CACHE_RENDER_SCALE`), all
+        cores.
         None also when the folder's first lens sample found that sharing does not pay
         (:func:`sharing_chosen`).
     """
@@ -98,7 +96,7 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike,
             for n in (plan.film.width_px, plan.film.height_px))
     try:
         povray_render(folder.wrapper("pinhole"), image, w, h,
-                      threads=threads or os.cpu_count() or 1,
+                      threads=os.cpu_count() or 1,
                       library_paths=[Path(plan.inputs.scene).parent],
                       povray_options=povray_options_of(plan.inputs),
                       extra_args=[f"Radiosity_File_Name={tmp.name}", "+RFO"])
