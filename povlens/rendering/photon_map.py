@@ -25,11 +25,9 @@ import os
 import secrets
 from pathlib import Path
 
-from povlens.plan.options import povray_options_of
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
-from povlens.pov.process import render as povray_render
-from povlens.util.files import temporary_path
+from povlens.rendering.pinhole_products import pinhole_product
 
 __all__ = ["photon_map_for", "photon_load_args", "MAP_RENDER_SIZE"]
 
@@ -59,21 +57,9 @@ def photon_map_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     if photon_map.is_file() and photon_map.stat().st_size > 0:
         return photon_map
     number = 100_000 + secrets.randbelow(900_000)   # six digits: SDL's str() prints it whole
-    partial = folder.photon_map_partial(number)
-    image = temporary_path(folder.path / "photon-map.exr")
-    try:
-        povray_render(folder.wrapper("pinhole"), image, *MAP_RENDER_SIZE,
-                      threads=os.cpu_count() or 1,
-                      library_paths=[Path(plan.inputs.scene).parent],
-                      povray_options=povray_options_of(plan.inputs),
-                      extra_args=[f"Declare={RenderFolder.photon_map_names()['save_flag']}"
-                                  f"={number}"])
-        if partial.is_file() and partial.stat().st_size > 0:
-            os.replace(partial, photon_map)
-    finally:
-        partial.unlink(missing_ok=True)
-        image.unlink(missing_ok=True)
-    return photon_map if photon_map.is_file() else None
+    flag = RenderFolder.photon_map_names()["save_flag"]
+    return pinhole_product(plan, outdir, folder.photon_map_partial(number), photon_map,
+                           MAP_RENDER_SIZE, [f"Declare={flag}={number}"])
 
 
 def photon_load_args(photon_map: Path | None) -> list[str]:

@@ -29,8 +29,7 @@ renders one lens sample with its own radiosity and one reading them, side by sid
 the faster, wall clock, decides for the rest (:func:`choice_from`): the first to finish,
 since the other has then taken as long already (or, across batches, when both have). ``radiosity.json`` keeps the measurements (with POV-Ray's
 phase times, ``+GS``) and the choice for every later batch; a batch that renders one
-probe records it for the next. The pinhole render that saves the samples is the image's size
-(:data:`CACHE_RENDER_SCALE` 1): a quarter-size one is cheaper (cornell 3.0 s at 80x60
+probe records it for the next. The pinhole render that saves the samples is the image's size: a quarter-size one is cheaper (cornell 3.0 s at 80x60
 against 4.6 s at 320x240, its samples then 1.88 s against 1.80 s), but balcony's samples
 trace 6.8 s reading a quarter-size one against 4.8 s reading a full one (36.3 s against
 40.9 s for the render).
@@ -39,28 +38,22 @@ trace 6.8 s reading a quarter-size one against 4.8 s reading a full one (36.3 s 
 from __future__ import annotations
 
 import json
-import math
 import os
 import re
 from pathlib import Path
 
-from povlens.plan.options import povray_options_of
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
-from povlens.pov.process import render as povray_render
+from povlens.rendering.pinhole_products import pinhole_product
 from povlens.util.files import temporary_path, write_text
 
 __all__ = ["radiosity_cache_for", "radiosity_read_args", "sharing_chosen", "probes_missing",
            "choice_from", "probe_measurement", "record_probes", "PROBES",
-           "STATISTICS_SWITCHES", "CACHE_RENDER_SCALE"]
+           "STATISTICS_SWITCHES"]
 
 #: The two measurements the choice compares: a lens sample computing its own radiosity,
 #: and one reading the shared samples.
 PROBES = ("own", "shared")
-#: The pinhole render saving the samples is this many times smaller each way than the
-#: image (at least :data:`CACHE_RENDER_MIN_PX` pixels each way; module doc).
-CACHE_RENDER_SCALE = 1
-CACHE_RENDER_MIN_PX = 32
 #: POV-Ray switches after povlens's quiet ones that print the statistics (to stderr).
 STATISTICS_SWITCHES = ("+GS",)
 _PHASE_S = r"{}:[^(\n]*\(([0-9.]+) seconds\)"
@@ -79,8 +72,8 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     -------
     Path or None
         ``RenderFolder(outdir).radiosity_cache``; made by one pinhole render of the
-        folder's ``pinhole.pov`` at the image's size (:data:`CACHE_RENDER_SCALE`), all
-        cores.
+        folder's ``pinhole.pov`` at the image's size, all cores
+        (:func:`povlens.rendering.pinhole_products.pinhole_product`).
         None also when the folder's first lens sample found that sharing does not pay
         (:func:`sharing_chosen`).
     """
@@ -91,21 +84,8 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     if cache.is_file() and cache.stat().st_size > 0:
         return cache
     tmp = temporary_path(cache)
-    image = temporary_path(folder.path / "radiosity-pretrace.exr")
-    w, h = (max(CACHE_RENDER_MIN_PX, math.ceil(n / CACHE_RENDER_SCALE))
-            for n in (plan.film.width_px, plan.film.height_px))
-    try:
-        povray_render(folder.wrapper("pinhole"), image, w, h,
-                      threads=os.cpu_count() or 1,
-                      library_paths=[Path(plan.inputs.scene).parent],
-                      povray_options=povray_options_of(plan.inputs),
-                      extra_args=[f"Radiosity_File_Name={tmp.name}", "+RFO"])
-        if tmp.is_file() and tmp.stat().st_size > 0:
-            os.replace(tmp, cache)
-    finally:
-        tmp.unlink(missing_ok=True)
-        image.unlink(missing_ok=True)
-    return cache if cache.is_file() else None
+    return pinhole_product(plan, outdir, tmp, cache, (plan.film.width_px, plan.film.height_px),
+                           [f"Radiosity_File_Name={tmp.name}", "+RFO"])
 
 
 def radiosity_read_args(cache: Path | None, cwd: Path) -> list[str]:

@@ -8,14 +8,13 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from povlens.pov.sdl import parse_scene_camera
 from povlens.util.images import read_image
+from tests.rendering.test_radiosity_cache import SIZE, _povlens
 
 pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
 
@@ -31,15 +30,6 @@ plane { y, 0 pigment { rgb 0.8 } }
 sphere { <0, 0.6, 0>, 0.5 pigment { rgbf <1, 1, 1, 0.95> }
   interior { ior 1.5 } photons { target refraction on reflection on } }
 """
-SIZE = ("--width", "48", "--height", "36", "--lens", "dgauss.50mm", "--method", "mesh",
-        "--samples", "4", "-q")
-
-
-def _povlens(*args, cwd=None):
-    r = subprocess.run([sys.executable, "-m", "povlens", *map(str, args)], capture_output=True,
-                       text=True, timeout=300, cwd=cwd)
-    assert r.returncode == 0, r.stderr
-    return r
 
 
 def test_the_scene_reader_repeats_the_photons_block_with_values(tmp_path):
