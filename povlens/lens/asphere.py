@@ -30,7 +30,7 @@ import numpy as np
 __all__ = ["N_ASPHERE", "TERM_NAMES", "DIRECTIVE", "sag_mm", "slope_over_r", "domain_r2_mm2",
            "aspheric_rows", "paraxial_curvature_per_mm", "row_sag", "sag_range_mm",
            "row_domain_radius_mm",
-           "parse_directive", "format_directive", "scaled_asphere"]
+           "parse_directive", "format_directive", "scaled_asphere", "stable_quadric_root"]
 
 #: Numbers per row: k, then a2 .. a16.
 N_ASPHERE = 9
@@ -184,3 +184,22 @@ def scaled_asphere(asphere: np.ndarray | None, factor: float) -> np.ndarray | No
     powers = np.arange(N_ASPHERE, dtype=np.float64) * 2.0     # 0 (k), 2, 4, ... 16
     scale = np.where(powers == 0, 1.0, float(factor) ** (1.0 - powers))
     return asphere * scale
+
+
+def stable_quadric_root(a, B, C, ds):
+    """The wanted root t of ``a t^2 + 2 B t + C = 0`` for rays whose sag direction is
+    ``ds`` (the vertex branch met in the travel sense), without cancellation (the
+    sphere's rule in :mod:`povlens.lens.tracer`, for any quadric of the vertex form).
+
+    Returns
+    -------
+    t : the root (not finite where the quadric is missed or degenerate).
+    D : the discriminant B^2 - a C (< 0: missed).
+    same : where B has the sign of the travel sense (the ``-C / (B + sigma sqrt D)`` form).
+    """
+    D = B * B - a * C
+    sqrtD = np.sqrt(np.maximum(D, 0.0))
+    sigma = -np.sign(ds)
+    same = (np.sign(B) == sigma) | (B == 0.0)
+    t = np.where(same, -C / (B + sigma * sqrtD), (sigma * sqrtD - B) / np.where(a != 0, a, 1.0))
+    return t, D, same

@@ -233,11 +233,7 @@ def _quadric_hit(c_y, k, c_x, x, y, ps, dx, dy, ds):
     a = c_x * dx * dx + c_y * dy * dy + m * ds * ds
     B = c_x * x * dx + c_y * y * dy + m * ps * ds - ds
     C = c_x * x * x + c_y * y * y + m * ps * ps - 2.0 * ps
-    D = B * B - a * C
-    sqrtD = np.sqrt(np.maximum(D, 0.0))
-    sigma = -np.sign(ds)
-    same = (np.sign(B) == sigma) | (B == 0.0)
-    t = np.where(same, -C / (B + sigma * sqrtD), (sigma * sqrtD - B) / np.where(a != 0, a, 1.0))
+    t, D, same = _asph.stable_quadric_root(a, B, C, ds)
     ok = (D >= 0.0) & np.isfinite(t) & (1.0 - m * (ps + t * ds) > 0.0) & ((a != 0) | same)
     return t, ok, m
 

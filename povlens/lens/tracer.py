@@ -62,7 +62,8 @@ import dataclasses
 import numpy as np
 
 from povlens.lens.aperture_shape import shape_margin_mm2
-from povlens.lens.asphere import aspheric_rows, domain_r2_mm2, sag_mm, slope_over_r
+from povlens.lens.asphere import (aspheric_rows, domain_r2_mm2, sag_mm, slope_over_r,
+                                  stable_quadric_root)
 from povlens.lens.coordinates import vertex_z_mm
 from povlens.lens.prescription import LensPrescription
 from povlens.lens.toric import intersect as toric_intersect, row_params, toric_rows
@@ -166,11 +167,7 @@ def _intersect_asphere(c: float, row: np.ndarray, vertex_z: float, x, y, z, dx, 
     a = c * (dx * dx + dy * dy) + g * ds * ds
     B = c * (x * dx + y * dy) + g * ps * ds - ds
     C = c * (x * x + y * y) + g * ps * ps - 2.0 * ps
-    D = B * B - a * C
-    sqrtD = np.sqrt(np.maximum(D, 0.0))
-    sigma = -np.sign(ds)
-    same = (np.sign(B) == sigma) | (B == 0.0)
-    t = np.where(same, -C / (B + sigma * sqrtD), (sigma * sqrtD - B) / np.where(a != 0, a, 1.0))
+    t, D, same = stable_quadric_root(a, B, C, ds)
     conic_ok = (D >= 0.0) & np.isfinite(t) & (1.0 - g * (ps + t * ds) > 0.0) & ((a != 0) | same)
     t = np.where(conic_ok, t, -ps / ds)           # else: the vertex tangent plane
     done = np.zeros(t.shape, dtype=bool)
