@@ -35,6 +35,7 @@ from povlens.rendering.folder_composite import sample_sums
 from povlens.rendering.folder_inputs import lens_for, pupil_table_for
 from povlens.rendering.groups import GroupSums, pack_group
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, render_samples
+from povlens.rendering.sample_stacks import stack_plan
 
 __all__ = ["render_sample", "render_group", "forget_render", "forget_render_async"]
 
@@ -116,9 +117,11 @@ def _render(job: dict, outdir: Path, ks: list[int], group: bool, stop: threading
         sums.ready(folder.sample_done)
         t_sums += time.perf_counter() - t
 
+    cores = max(1, in_flight // POVRAY_IN_FLIGHT)
     timing = render_samples(plan, lens, table, outdir, 0, ks,
                             in_flight=in_flight if group else 1,
-                            on_done=add_ready if group else None, stop=stop)
+                            on_done=add_ready if group else None, stop=stop,
+                            stacking=stack_plan(plan, ks, cores) if group else None)
     files = {}
     if stop.is_set():
         return files, timing, t_sums, in_flight

@@ -165,11 +165,13 @@ def uv_model(width: int, height: int, jitter_px=(0.5, 0.5), version: str = "3.7.
                    (float(jitter_px[0]), float(jitter_px[1])))
 
 
-def pass_size(width: int, height: int, stride: int) -> tuple[int, int]:
+def pass_size(width: int, height: int, stride: int, bands: int = 1) -> tuple[int, int]:
     """(W', H'): what POV-Ray renders for an interleaved pass of m = ``stride``: m^2
-    tiles of ceil(W / m) x ceil(H / m) pixels in a row, plus FS#261's column and row."""
+    tiles of ceil(W / m) x ceil(H / m) pixels in a row, plus FS#261's column and row;
+    ``bands`` passes (lens samples) stacked one under another in one render
+    (:mod:`povlens.rendering.sample_stacks`)."""
     m = int(stride)
-    return m * m * -(-int(width) // m) + 1, -(-int(height) // m) + 1
+    return m * m * -(-int(width) // m) + 1, int(bands) * -(-int(height) // m) + 1
 
 
 def pass_rows(rows: tuple[int, int], stride: int) -> tuple[int, int]:
@@ -179,22 +181,28 @@ def pass_rows(rows: tuple[int, int], stride: int) -> tuple[int, int]:
     return int(rows[0]) // m, -(-int(rows[1]) // m)
 
 
-def pass_models(width: int, height: int, stride: int, jitters, version: str = "3.7.0.10"
-                ) -> list[UVModel]:
+def pass_models(width: int, height: int, stride: int, jitters, version: str = "3.7.0.10",
+                band: int = 0, bands: int = 1) -> list[UVModel]:
     """The m x m tiles of one interleaved pass (m = ``stride``), tile c = ox + m oy with
-    offset (ox, oy) and sub-pixel offset ``jitters[c]``; m = 1 is :func:`uv_model`."""
+    offset (ox, oy) and sub-pixel offset ``jitters[c]``; m = 1 is :func:`uv_model`.
+
+    ``band`` of ``bands``: the pass is band b of a render stacking that many passes one
+    under another (its tiles' rendered rows start at b ceil(H / m)); the render's
+    rows of band b, cut out, are exactly the pass rendered alone."""
     _check_version(version)
-    m, W, H = int(stride), int(width), int(height)
-    if m == 1:
+    m, W, H, b = int(stride), int(width), int(height), int(band)
+    if not 0 <= b < int(bands):
+        raise ValueError(f"band {band} of {bands}")
+    if m == 1 and int(bands) == 1:
         return [uv_model(W, H, jitters[0], version)]
     Wt, Ht = -(-W // m), -(-H // m)
-    Wr, Hr = pass_size(W, H, m)
+    Wr, Hr = pass_size(W, H, m, bands)
     out = []
     for oy in range(m):
         for ox in range(m):
             j = jitters[ox + m * oy]
             out.append(UVModel(W, H, Wr, Hr, 1, 1, (float(j[0]), float(j[1])), m, (ox, oy),
-                               ((ox + m * oy) * Wt, 0),
+                               ((ox + m * oy) * Wt, b * Ht),
                                (len(range(ox, W, m)), len(range(oy, H, m))), (Wt, Ht)))
     return out
 
@@ -355,10 +363,11 @@ def build_field_mesh(ray_field, placement, model: UVModel, grid: tuple[int, int]
 
 
 def build_field_meshes(ray_field, placement, models: list[UVModel], grid: tuple[int, int],
-                       eps: float, pixel_angle_rad: float) -> list[FieldMesh]:
+                       eps: float, pixel_angle_rad: float, origin_world=None) -> list[FieldMesh]:
     """:func:`build_field_mesh` of every tile of a pass, each stage's rays traced in one
     call: ``ray_field(x, y, tile)`` traces image positions of the tiles ``tile`` (n,)
-    (indices into ``models``).  The tiles share the first one's ``origin_world``."""
+    (indices into ``models``).  The tiles share ``origin_world`` (default the first
+    one's: the passes of one stacked render share the first pass's)."""
     pts = [mesh_points(m, grid) for m in models]
     tile_v = np.concatenate([np.full(len(p.x), i) for i, p in enumerate(pts)])
     tile_f = np.concatenate([np.full(len(p.fit_x), i) for i, p in enumerate(pts)])
@@ -366,7 +375,7 @@ def build_field_meshes(ray_field, placement, models: list[UVModel], grid: tuple[
                        tile_v)
     rays_f = ray_field(np.concatenate([p.fit_x for p in pts]),
                        np.concatenate([p.fit_y for p in pts]), tile_f)
-    out, origin = [], None
+    out, origin = [], origin_world
     for i, (m, p) in enumerate(zip(models, pts)):
         mesh = encode_field_mesh(p, take_rays(rays_v, tile_v == i), take_rays(rays_f, tile_f == i),
                                  placement, m, grid, eps, pixel_angle_rad, origin)

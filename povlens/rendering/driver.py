@@ -27,6 +27,7 @@ from povlens.plan.schema import Plan, read_plan
 from povlens.rendering.folder_composite import composite_outdir
 from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, mark_batches_done, render_samples
+from povlens.rendering.sample_stacks import stack_plan
 from povlens.rendering.views import render_view
 from povlens.util.files import write_text
 
@@ -81,7 +82,8 @@ def _render_locked(outdir: Path, jobs: int | None, quiet: bool,
 
         with _progress(len(todo), "lens samples", quiet) as bar:
             timing = render_samples(plan, lens, table, outdir, 0, samples(),
-                                    in_flight=in_flight, on_done=lambda: bar.update(1))
+                                    in_flight=in_flight, on_done=lambda: bar.update(1),
+                                    stacking=stack_plan(plan, todo, jobs))
         write_text(folder.timing("render"), json.dumps(timing) + "\n")
     mark_batches_done(outdir, plan)
     composite_outdir(outdir)

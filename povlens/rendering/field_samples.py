@@ -37,7 +37,8 @@ from povlens.pupil.rays import ScenePlacement
 from povlens.rendering.vignetting import mesh_illumination_map
 
 __all__ = ["placement_of", "FieldTile", "field_tiles", "field_domain_of", "sample_lens",
-           "write_field_sample", "field_sample_weight", "image_layout",
+           "write_field_sample", "write_field_stack", "stack_origin_world",
+           "field_sample_weight", "image_layout",
            "illumination_map", "render_rows"]
 
 
@@ -71,9 +72,10 @@ class FieldTile:
     pupil: PupilMap
 
 
-def field_tiles(plan: Plan, k: int) -> list[FieldTile]:
+def field_tiles(plan: Plan, k: int, band: int = 0, bands: int = 1) -> list[FieldTile]:
     """The tiles of pass k.  The same for every sample count (Sobol' prefixes), so a
-    plan that adds samples keeps the first ones."""
+    plan that adds samples keeps the first ones.  ``band`` of ``bands``: where the pass
+    is rendered in a stacked render (:func:`povlens.pov.field_mesh.pass_models`)."""
     inp, fm, film = plan.inputs, plan.field_mesh, plan.film
     n = 1 << max(0, int(inp.samples) - 1).bit_length()
     pts = tile_points(_points(n, int(inp.seed), bool(inp.jitter))[k], fm.interleave,
@@ -81,7 +83,7 @@ def field_tiles(plan: Plan, k: int) -> list[FieldTile]:
     if not inp.jitter:
         pts[:, :2] = 0.5
     models = pass_models(film.width_px, film.height_px, fm.interleave, pts[:, :2],
-                         plan.povray.version)
+                         plan.povray.version, band, bands)
     domain = field_domain_of(plan)
     return [FieldTile(m, PupilMap(domain, tuple(concentric_disc_mm(p[2:], 1.0))))
             for m, p in zip(models, pts)]
@@ -129,15 +131,17 @@ def sample_lens(plan: Plan, lens, k: int):
     return lens_at_wavelength(lens, float(sample_wavelength_nm(k, plan.inputs.seed)[0]))
 
 
-def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path) -> bool:
-    """Trace pass k, write its pass mask and, if any pixel of its rows passes, its
-    mesh to ``inc``.  Returns False when every ray of its rows is blocked."""
+def _field_pass(plan: Plan, lens, table, outdir: Path, k: int, band: int, bands: int,
+                origin_world):
+    """Trace pass k as band ``band`` of ``bands``, write its pass mask (and grey-mask
+    transmission); returns its :class:`~povlens.pov.field_mesh.PassMesh`, or None when
+    every ray of its rows is blocked."""
     film, fm = plan.film, plan.field_mesh
     fd = plan.focus.film_distance_mm
     lens = sample_lens(plan, lens, k)
     placement = placement_of(plan)
     pixel_angle = film.pixel_pitch_mm / abs(plan.lens.efl_mm)
-    tiles = field_tiles(plan, k)
+    tiles = field_tiles(plan, k, band, bands)
     domain = field_domain_of(plan)
     qs = np.array([t.pupil.q for t in tiles])
 
@@ -146,7 +150,8 @@ def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path)
         return trace_field(lens, fd, film, table.plane_z_mm,
                            lambda f: domain.points_mm(f, q), x, y)
     models = [t.model for t in tiles]
-    meshes = build_field_meshes(field, placement, models, fm.grid, fm.eps, pixel_angle)
+    meshes = build_field_meshes(field, placement, models, fm.grid, fm.eps, pixel_angle,
+                                origin_world)
     masks = pass_masks([m.node_margins() + t.model.pixel_positions()
                         for m, t in zip(meshes, tiles)], field)
     passed = np.zeros((film.height_px, film.width_px), bool)
@@ -166,15 +171,52 @@ def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path)
     if masked:          # before the mask (its done marker)
         folder.write_transmission(k, transmission)
     folder.write_pass_mask(k, passed)
-    if not passed.any():
-        return False
-    one = combine_meshes(meshes)
-    part = folder.partial(inc)
-    with open(part, "w") as f:
-        f.write(mesh2_text(one))
-        f.write(placement_text(one))
-    os.replace(part, inc)
-    return True
+    return combine_meshes(meshes) if passed.any() else None
+
+
+def stack_origin_world(plan: Plan, lens, table) -> np.ndarray:
+    """(3,) the world point every field pass's mesh of the plan is stored relative to:
+    the middle of the rays from the film's centre to five pupil points (the film
+    centre itself when none exists), so a pass's float32 vertices do not depend on
+    which passes share its run (:mod:`povlens.rendering.sample_stacks`)."""
+    film = plan.film
+    q = np.array([[0.0, 0.0], [0.5, 0.0], [-0.5, 0.0], [0.0, 0.5], [0.0, -0.5]])
+    domain = field_domain_of(plan)
+    x = np.full(len(q), 0.5 * film.width_px)
+    y = np.full(len(q), 0.5 * film.height_px)
+    rays = trace_field(lens, plan.focus.film_distance_mm, film, table.plane_z_mm,
+                       lambda f: domain.points_mm(f, q), x, y)
+    if not rays.exists.any():
+        return np.array(plan.placement.film_centre, dtype=np.float64)
+    p = placement_of(plan).points_to_world(rays.origin_mm[rays.exists])
+    return 0.5 * (p.min(0) + p.max(0))
+
+
+def write_field_stack(plan: Plan, lens, table, outdir: Path, ks, inc: Path,
+                      bands: int = 1) -> list[bool]:
+    """Trace passes ``ks``, write their pass masks and, if any pixel of their rows
+    passes, one mesh to ``inc`` drawing pass k in band k mod ``bands`` of a stack
+    (:mod:`povlens.rendering.sample_stacks`; 1: the pass's own render).  Returns for
+    each pass whether it has a band to render (False: every ray of its rows is
+    blocked)."""
+    origin = stack_origin_world(plan, lens, table)
+    meshes = [_field_pass(plan, lens, table, outdir, int(k), int(k) % bands, bands, origin)
+              for k in ks]
+    drawn = [m for m in meshes if m is not None]
+    if drawn:
+        one = combine_meshes(drawn)
+        part = RenderFolder(outdir).partial(inc)
+        with open(part, "w") as f:
+            f.write(mesh2_text(one))
+            f.write(placement_text(one))
+        os.replace(part, inc)
+    return [m is not None for m in meshes]
+
+
+def write_field_sample(plan: Plan, lens, table, outdir: Path, k: int, inc: Path) -> bool:
+    """Trace pass k, write its pass mask and, if any pixel of its rows passes, its
+    mesh to ``inc``.  Returns False when every ray of its rows is blocked."""
+    return write_field_stack(plan, lens, table, outdir, [k], inc)[0]
 
 
 def field_sample_weight(plan: Plan, table, outdir: Path, k: int) -> np.ndarray:

@@ -46,12 +46,14 @@ from povlens.pov.process import (pixel_range_args, povray_command, povray_finish
                                  render_switches, start_povray)
 from povlens.pupil.rays import sample_points, sample_rays
 from povlens.rendering.field_samples import (placement_of, render_rows, sample_lens,
-                                             write_field_sample)
+                                             write_field_stack)
 from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
 from povlens.rendering.pixel_sampler import pixel_sampler
 from povlens.util.files import write_text
 from povlens.util.images import write_exr
 from povlens.rendering.photon_map import photon_load_args, photon_map_for
+from povlens.rendering.sample_stacks import (StackPlan, split_stack, stack_bands, stack_plan,
+                                             stack_row_args, stack_runs)
 from povlens.rendering.radiosity_cache import (STATISTICS_SWITCHES, choice_from,
                                                probe_measurement, probes_missing,
                                                radiosity_cache_for, radiosity_read_args,
@@ -77,7 +79,7 @@ def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
     (default: :func:`povlens.pupil.rays.sample_points`); :mod:`povlens.bench`
     uses both to render with the baseline samplers and random points.  A plan
     with field meshes writes its sample with
-    :func:`povlens.rendering.field_samples.write_field_sample` (no ``points``).
+    :func:`_write_stack` (no ``points``).
     """
     folder = RenderFolder(outdir)
     inc = folder.sample_mesh(k)
@@ -87,10 +89,7 @@ def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
             raise PovlensError("field-mesh samples share one pupil point per sample: "
                                "they take no per-pixel sample points",
                                "convert with --ray-mesh pixel")
-        if write_field_sample(plan, lens, table, outdir, k, inc):
-            return True
-        write_text(folder.sample_blocked(k), "%d %d\n" % plan.rows_of_sample(k))
-        return False
+        return _write_stack(plan, lens, table, outdir, [k], stack_bands(plan))[0]
     film = plan.film
     placement = placement_of(plan)
     inp = plan.inputs
@@ -120,6 +119,22 @@ def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
     os.replace(part, inc)
     write_exr(folder.sample_weight(k), weight[..., None].astype(np.float32))
     return True
+
+
+def _write_stack(plan: Plan, lens, table, outdir: Path, ks: list[int],
+                 bands: int) -> list[bool]:
+    """Write the one ray mesh of field passes ``ks``, each in its band of a stack of
+    ``bands`` (:mod:`povlens.rendering.sample_stacks`), as the first one's, and their
+    pass masks; a blocked pass gets its marker.  Returns which passes have a band to
+    render."""
+    folder = RenderFolder(outdir)
+    for k in ks:
+        folder.sample_blocked(k).unlink(missing_ok=True)    # one of an earlier render: stale
+    drawn = write_field_stack(plan, lens, table, outdir, ks, folder.sample_mesh(ks[0]), bands)
+    for k, ok in zip(ks, drawn):
+        if not ok:
+            write_text(folder.sample_blocked(k), "%d %d\n" % plan.rows_of_sample(k))
+    return drawn
 
 
 def film_row_args(povray: PovraySettings, rows: tuple[int, int]) -> list[str]:
@@ -163,12 +178,15 @@ class _SampleRenders:
     ``sample_KKKK.exr`` when POV-Ray succeeds; its mesh is deleted then."""
 
     def __init__(self, plan: Plan, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT,
-                 on_done=None):
+                 on_done=None, threads: int = 1, one_run: bool = False):
         self.plan, self.folder, self.batch = plan, RenderFolder(outdir), batch
         self.on_done = on_done
         self.samples = self.folder.samples
         self.limit = max(1, int(limit))
+        self.threads = max(1, int(threads))
         self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
+        # first sample of a run -> (its samples, which are drawn, the stack's bands)
+        self.stacks: dict[int, tuple[list[int], list[bool], int]] = {}
         self.povray_s = 0.0
         self.povray_options = povray_options_of(plan.inputs)   # the user's, checked once
         # the radiosity samples of one pretrace, made before the first sample that reads
@@ -177,8 +195,11 @@ class _SampleRenders:
         self.radiosity: list[str] = []
         self.probes: dict[int, str] = {}            # sample -> "own" / "shared", running
         self.measured: dict[str, dict] = {}         # kind -> its finished measurement
-        self.choosing = plan.povray.radiosity_cache and sharing_chosen(outdir) is None
-        if not self.choosing:
+        chosen = sharing_chosen(outdir)
+        # one run for every sample left: its own pretrace serves them all, so a file
+        # made for it would only add a pinhole render (nothing to choose)
+        self.choosing = plan.povray.radiosity_cache and chosen is None and not one_run
+        if not self.choosing and (chosen is not None or not one_run):
             self.radiosity = radiosity_read_args(radiosity_cache_for(plan, outdir),
                                                  self.samples)
 
@@ -222,11 +243,24 @@ class _SampleRenders:
         self.radiosity = radiosity_read_args(cache, self.samples)
         return True
 
-    def start(self, k: int) -> None:
+    def _rows_args(self, k: int) -> tuple[int, list[str]]:
+        """The render's height and POV-Ray's column and row switches for the run whose
+        first sample is k: one pass's film rows, or every band of a stack."""
+        pv = self.plan.povray
+        ks, _, bands = self.stacks[k]
+        if bands == 1:
+            return pv.render_height, film_row_args(pv, render_rows(self.plan, k))
+        return stack_row_args(self.plan, ks, bands)
+
+    def start(self, k: int, stack: tuple[list[int], list[bool], int] | None = None) -> None:
+        """Start the run of sample k, or of the passes ``(ks, drawn, bands)`` of one
+        stack whose first is k (:mod:`povlens.rendering.sample_stacks`)."""
         while len(self.running) >= self.limit:
             self._reap(block=True)
+        self.stacks[k] = stack or ([k], [True], 1)
         radiosity = self._radiosity_args(k)
         pv = self.plan.povray
+        height, rows = self._rows_args(k)
         pov = self.folder.batch_wrapper(self.batch)
         tmp = None
         try:        # until the process is tracked, the folder is this call's to remove
@@ -235,12 +269,11 @@ class _SampleRenders:
                                             dir=self.samples))
             rel = os.path.relpath(tmp, self.samples)
             switches = render_switches(
-                "f.exr", pv.render_width, pv.render_height, threads=1,
+                "f.exr", pv.render_width, height, threads=self.threads,
                 library_paths=[Path(self.plan.inputs.scene).parent],
                 povray_options=self.povray_options,
                 extra_args=[*MESH_SWITCHES, *radiosity, *self.photons,
-                            f"Declare=PovlensFrame={k}",
-                            *film_row_args(pv, render_rows(self.plan, k))])
+                            f"Declare=PovlensFrame={k}", *rows])
             cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
             with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:
                 proc = start_povray(cmd, self.samples, err)
@@ -275,8 +308,10 @@ class _SampleRenders:
                 shutil.rmtree(tmp, ignore_errors=True)
                 self.folder.sample_mesh(k).unlink(missing_ok=True)
                 self.running.pop(k, None)
+            ks, drawn, _ = self.stacks.pop(k, ([k], [True], 1))
             if self.on_done is not None:
-                self.on_done()
+                for _ in range(sum(drawn)):
+                    self.on_done()
 
     def _collect(self, k: int, proc: subprocess.Popen, tmp: Path) -> None:
         pov = self.folder.batch_wrapper(self.batch)
@@ -285,16 +320,25 @@ class _SampleRenders:
             # its real cause: a full disk, a parse error in the wrapper, or the scene
             stderr = (tmp / "stderr.txt").read_text(errors="replace")
             raise povray_failure(pov, self.samples, proc.returncode, stderr, "",
-                                 self.folder.sample_image(k), what=f"lens sample {k} of {pov}",
+                                 self.folder.sample_image(k), what=self._what(k, pov),
                                  hint="fix the scene, or run 'make' in the folder to see "
                                       "the command")
-        os.replace(out, self.folder.sample_image(k))
+        ks, drawn, bands = self.stacks[k]
+        if bands == 1:
+            os.replace(out, self.folder.sample_image(k))
+        else:
+            split_stack(self.plan, out, self.folder.path, ks, drawn, bands)
         kind = self.probes.pop(k, None)
         if kind is not None and self.choosing:
             self.measured[kind] = probe_measurement(
                 k, time.perf_counter() - self.running[k][2],
                 (tmp / "stderr.txt").read_text(errors="replace"))
             self._settle(final=True)
+
+    def _what(self, k: int, pov: Path) -> str:
+        ks = self.stacks.get(k, ([k],))[0]
+        return (f"lens sample {k} of {pov}" if len(ks) == 1 else
+                f"lens samples {', '.join(map(str, ks))} (one run) of {pov}")
 
     def finish(self) -> None:
         while self.running:
@@ -311,16 +355,22 @@ class _SampleRenders:
             shutil.rmtree(tmp, ignore_errors=True)
             self.folder.sample_mesh(k).unlink(missing_ok=True)
         self.running.clear()
+        self.stacks.clear()
 
 
 def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: int,
                    samples, points=None, in_flight: int = POVRAY_IN_FLIGHT,
-                   stop=None, on_done=None, plan_for=None) -> dict:
+                   stop=None, on_done=None, plan_for=None, stacking=None) -> dict:
     """Trace, write and render lens samples ``samples`` of batch ``batch``, pipelined.
 
     For each sample in turn: trace its rays and write its mesh and weights
     (:func:`_write_mesh`), then start its POV-Ray process and go on to the next
-    sample while it runs (at most ``in_flight`` at once).  Samples whose rays are
+    sample while it runs (at most ``in_flight`` at once).  A field plan draws each
+    pass in its band of a stack (:mod:`povlens.rendering.sample_stacks`);
+    ``stacking``, a :class:`~povlens.rendering.sample_stacks.StackPlan`
+    (:func:`~povlens.rendering.sample_stacks.stack_plan`), renders the samples of one
+    stack in one run on ``stacking.threads`` threads (default: each sample alone, one
+    thread).  Samples whose rays are
     all blocked are not rendered.  ``sampler`` is the lens sampler (normally the
     plan's exit-pupil table); ``points(k)`` overrides the plan's sample points
     (:mod:`povlens.bench`).  ``stop``: a :class:`threading.Event`; once set, no
@@ -331,29 +381,38 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     ``plan_for(k)`` the plan to trace sample k with (default ``plan``; plans that
     differ only in the sample count give the same sample k).  Returns timings: {samples, blocked,
     rays_and_meshes_s (Python), povray_s (summed over the overlapping processes),
-    wall_s}.
+    wall_s, stack}.
     """
     outdir = Path(outdir)
     t0 = time.perf_counter()
     t_mesh = 0.0
     blocked = 0
-    queue = _SampleRenders(plan, outdir, batch, in_flight, on_done)
+    bands = stack_bands(plan) if points is None else 1
+    if stacking is None or bands == 1:
+        stacking = StackPlan(bands, 0, 1, False)
+    queue = _SampleRenders(plan, outdir, batch, in_flight, on_done, stacking.threads,
+                           stacking.runs == 1)
     seen: list[int] = []
     try:
-        for k in samples:
+        for ks in stack_runs(samples, bands, stacking.together):
             if stop is not None and stop.is_set():
                 queue.abort()
                 break
-            seen.append(k)
+            seen += ks
             t = time.perf_counter()
-            ok = _write_mesh(plan if plan_for is None else plan_for(k), lens, sampler, outdir,
-                             k, points=None if points is None else points(k))
-            t_mesh += time.perf_counter() - t
-            if ok:
-                queue.start(k)
+            if plan.field_mesh is None or points is not None:
+                k = ks[0]
+                drawn = [_write_mesh(plan if plan_for is None else plan_for(k), lens, sampler,
+                                     outdir, k, points=None if points is None else points(k))]
             else:
-                blocked += 1
-                if on_done is not None:
+                drawn = _write_stack(plan if plan_for is None else plan_for(ks[0]), lens,
+                                     sampler, outdir, ks, bands)
+            t_mesh += time.perf_counter() - t
+            if any(drawn):
+                queue.start(ks[0], (ks, drawn, bands))
+            blocked += len(ks) - sum(drawn)
+            if on_done is not None:
+                for _ in range(len(ks) - sum(drawn)):
                     on_done()
             queue._reap(block=False)
         if stop is not None and stop.is_set():
@@ -367,7 +426,8 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
         for k in seen:
             RenderFolder(outdir).sample_mesh(k).unlink(missing_ok=True)
     return {"samples": len(seen), "blocked": blocked, "rays_and_meshes_s": t_mesh,
-            "povray_s": queue.povray_s, "wall_s": time.perf_counter() - t0}
+            "povray_s": queue.povray_s, "wall_s": time.perf_counter() - t0,
+            "bands": bands, "runs_together": stacking.together, "threads": stacking.threads}
 
 
 def render_batch(outdir: str | os.PathLike, batch: int,
@@ -394,7 +454,8 @@ def render_batch(outdir: str | os.PathLike, batch: int,
                 table = pupil_table_for(outdir, plan, lens)
                 exposure_for(outdir, plan, lens, table)
                 timing = render_samples(plan, lens, table, outdir, batch, todo,
-                                        in_flight=in_flight)
+                                        in_flight=in_flight,
+                                        stacking=stack_plan(plan, todo, 1))
                 write_text(folder.batch_timing(batch), json.dumps(timing) + "\n")
             folder.mark_batch_done(batch, batches[batch])
     return todo

@@ -5,6 +5,7 @@ scene with radiosity shares one pretrace's samples (``radiosity.rca``, POV-Ray's
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -29,9 +30,14 @@ SIZE = ("--width", "48", "--height", "36", "--lens", "dgauss.50mm", "--method", 
         "--samples", "4", "-q")
 
 
-def _povlens(*args, cwd=None):
+#: One lens sample per POV-Ray run (``POVLENS_STACK``): a render of all its samples in
+#: one run computes one pretrace and has no file to share (test_sample_stacks.py).
+ONE_PER_RUN = {"POVLENS_STACK": "1"}
+
+
+def _povlens(*args, cwd=None, env=None):
     r = subprocess.run([sys.executable, "-m", "povlens", *map(str, args)], capture_output=True,
-                       text=True, timeout=300, cwd=cwd)
+                       text=True, timeout=300, cwd=cwd, env={**os.environ, **(env or {})})
     assert r.returncode == 0, r.stderr
     return r
 
@@ -39,14 +45,14 @@ def _povlens(*args, cwd=None):
 def test_a_radiosity_scene_shares_one_pretrace_and_keeps_its_image(tmp_path):
     scene = tmp_path / "rad.pov"
     scene.write_text(RADIOSITY_SCENE)
-    _povlens("render", scene, *SIZE, "-o", tmp_path / "cached")
+    _povlens("render", scene, *SIZE, "-o", tmp_path / "cached", env=ONE_PER_RUN)
     plan = json.loads((tmp_path / "cached" / "plan.json").read_text())
     assert plan["povray"]["radiosity_cache"] is True
     assert any(n.startswith("radiosity: its samples are computed once") for n in plan["notes"])
     assert (tmp_path / "cached" / "radiosity.rca").stat().st_size > 0
     # the user's own radiosity file option: every sample computes its own (the old way)
     _povlens("render", scene, *SIZE, "--povray-option", "Radiosity_File_Name=own.rca",
-             "-o", tmp_path / "plain")
+             "-o", tmp_path / "plain", env=ONE_PER_RUN)
     plain = json.loads((tmp_path / "plain" / "plan.json").read_text())
     assert "radiosity_cache" not in plain["povray"]
     assert not (tmp_path / "plain" / "radiosity.rca").exists()
@@ -64,7 +70,7 @@ def test_make_renders_with_the_shared_radiosity(tmp_path):
     _povlens("convert", scene, *SIZE[:-1], "--batch-size", "2", "-o", out)
     assert not (out / "radiosity.rca").exists()              # made by the first render
     r = subprocess.run(["make", "-C", str(out), "-j2"], capture_output=True, text=True,
-                       timeout=300)
+                       timeout=300, env={**os.environ, **ONE_PER_RUN})
     assert r.returncode == 0, r.stderr
     assert (out / "radiosity.rca").stat().st_size > 0 and (out / "image.exr").is_file()
     assert not list(out.glob(".radiosity*")) and not list(out.glob(".*tmp*"))
@@ -89,7 +95,7 @@ def test_two_samples_measure_whether_sharing_pays(tmp_path):
     scene = tmp_path / "rad.pov"
     scene.write_text(RADIOSITY_SCENE)
     out = tmp_path / "o"
-    _povlens("render", scene, *SIZE, "-o", out)
+    _povlens("render", scene, *SIZE, "-o", out, env=ONE_PER_RUN)
     rec = json.loads((out / "radiosity.json").read_text())
     assert rec["own"]["sample"] == 0 and rec["shared"]["sample"] == 1
     assert rec["own"]["wall_s"] > 0 and rec["shared"]["wall_s"] > 0
@@ -112,7 +118,7 @@ def test_a_recorded_choice_is_followed(tmp_path, share):
     record = {"share": share, "own": {"sample": 9, "radiosity_s": 1.0, "trace_s": 1.0},
               "shared": {"sample": 8, "radiosity_s": 0.5, "trace_s": 1.0}}
     (out / "radiosity.json").write_text(json.dumps(record))
-    _povlens("render", scene, *SIZE, "-o", out)
+    _povlens("render", scene, *SIZE, "-o", out, env=ONE_PER_RUN)
     assert (out / "radiosity.rca").is_file() is share
     assert json.loads((out / "radiosity.json").read_text()) == record
     assert read_image(out / "image.exr")[..., :3].mean() > 0.05

@@ -1,0 +1,121 @@
+"""Several lens samples per POV-Ray run (issue 25): field passes stacked as bands of one
+render give the images each pass rendered alone gives, and a render of all its samples
+in one run shares that run's radiosity pretrace instead of making a file."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from povlens.plan.schema import read_plan
+from povlens.pov.field_mesh import pass_models, pass_size
+from povlens.rendering.sample_stacks import (MAX_STACK, STACK_FACE_BUDGET, stack_bands,
+                                             stack_plan, stack_position, stack_runs)
+from povlens.util.images import read_image
+from tests.rendering.test_radiosity_cache import ONE_PER_RUN, RADIOSITY_SCENE, SIZE, _povlens
+
+ROOT = Path(__file__).resolve().parents[2]
+needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
+
+
+@pytest.mark.parametrize("stride", [1, 3])
+def test_a_band_samples_the_image_positions_the_pass_alone_samples(stride):
+    """Band b of a stack: the same image positions as the pass rendered alone, its UV
+    rectangles stacked without overlap inside [0, 1]."""
+    W, H, bands = 50, 37, 3
+    jit = np.random.default_rng(1).uniform(0, 1, (stride * stride, 2))
+    alone = pass_models(W, H, stride, jit)
+    assert pass_size(W, H, stride, bands)[1] == bands * (-(-H // stride)) + 1
+    rects = []
+    for b in range(bands):
+        models = pass_models(W, H, stride, jit, band=b, bands=bands)
+        for m, a in zip(models, alone):
+            xa, ya = a.uv_to_image(*a.pixel_uv())
+            xb, yb = m.uv_to_image(*m.pixel_uv())
+            np.testing.assert_allclose(xb, xa, atol=1e-9)
+            np.testing.assert_allclose(yb, ya, atol=1e-9)
+            assert np.array_equal(m.rows(), a.rows()) and np.array_equal(m.columns(), a.columns())
+            rects.append(m.uv_rect())
+    r = np.array(rects)
+    assert r[:, 2].min() >= 0 and r[:, 3].max() <= 1
+    assert int(r[:, 0].min() * 10) == 0           # in POV-Ray's first bin (truncated)
+    for i in range(len(r)):             # no two tiles' rectangles overlap
+        for j in range(i + 1, len(r)):
+            du = min(r[i, 1], r[j, 1]) - max(r[i, 0], r[j, 0])
+            dv = min(r[i, 3], r[j, 3]) - max(r[i, 2], r[j, 2])
+            assert du <= 1e-12 or dv <= 1e-12
+    with pytest.raises(ValueError):
+        pass_models(W, H, stride, jit, band=3, bands=3)
+
+
+@needs_povray
+def test_how_many_samples_a_run_renders(tmp_path, monkeypatch):
+    """The bands of a stack follow from the plan's field mesh (the face budget); one run
+    per stack the samples touch, threads for the cores the runs leave; one sample per
+    run for per-pixel meshes."""
+    monkeypatch.delenv("POVLENS_STACK", raising=False)
+    out = tmp_path / "o"
+    _povlens("convert", ROOT / "scenes" / "paper.pov", *SIZE[:-1], "-o", out)
+    plan = read_plan(out)
+    fm = plan.field_mesh
+    faces = 2 * fm.grid[0] * fm.grid[1] * fm.interleave ** 2
+    p = stack_bands(plan)
+    assert p == min(MAX_STACK, STACK_FACE_BUDGET // faces) and p >= 4
+    sp = stack_plan(plan, range(4), 2)
+    assert (sp.bands, sp.runs, sp.threads, sp.together) == (p, 1, 2, True)
+    assert [stack_position(plan, k) for k in (0, p - 1, p)] == [(0, 0), (0, p - 1), (1, 0)]
+    assert list(stack_runs([0, 1, p, p + 1, 2], p)) == [[0, 1], [p, p + 1], [2]]
+    assert list(stack_runs([0, 1], p, together=False)) == [[0], [1]]
+    monkeypatch.setenv("POVLENS_STACK", "2")
+    sp = stack_plan(plan, range(4), 2)
+    assert (sp.bands, sp.runs, sp.threads) == (2, 2, 1)
+    monkeypatch.delenv("POVLENS_STACK")
+    _povlens("convert", ROOT / "scenes" / "paper.pov", *SIZE[:-1], "--ray-mesh", "pixel",
+             "-o", tmp_path / "px")
+    assert stack_bands(read_plan(tmp_path / "px")) == 1
+
+
+@needs_povray
+def test_a_stacked_run_renders_what_one_run_per_sample_renders(tmp_path):
+    scene = ROOT / "scenes" / "paper.pov"
+    args = ("--width", "80", "--height", "60", "--lens", "dgauss.50mm", "--method", "mesh",
+            "--samples", "4", "--focus", "1.5", "-q")
+    _povlens("render", scene, *args, "-o", tmp_path / "one", env=ONE_PER_RUN)
+    _povlens("render", scene, *args, "-o", tmp_path / "stack")
+    timing = json.loads((tmp_path / "stack" / "samples" / "render.timing.json").read_text())
+    assert timing["bands"] >= 4 and timing["runs_together"] and timing["threads"] >= 1
+    assert json.loads((tmp_path / "one" / "samples" / "render.timing.json").read_text()
+                      )["bands"] == 1
+    for k in range(4):
+        a = read_image(tmp_path / "one" / "samples" / f"sample_{k:04d}.exr")
+        b = read_image(tmp_path / "stack" / "samples" / f"sample_{k:04d}.exr")
+        assert a.shape == b.shape
+        assert a[1:, :-1].mean() > 0.05
+        # the same rays but for float rounding: a few silhouette pixels differ
+        assert np.mean(np.abs(a - b).max(-1) > 2e-3) < 0.005
+    assert not list((tmp_path / "stack" / "samples").glob("*.inc"))
+    a = read_image(tmp_path / "one" / "image.exr")[..., :3]
+    b = read_image(tmp_path / "stack" / "image.exr")[..., :3]
+    assert np.sqrt(np.mean((a - b) ** 2)) < 2e-3
+
+
+@needs_povray
+def test_one_run_shares_its_own_pretrace_and_makes_no_file(tmp_path):
+    """Every sample in one run: no radiosity file, no probes; the image is the one
+    whose samples each compute their own radiosity, within radiosity's noise."""
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    _povlens("render", scene, *SIZE, "-o", tmp_path / "one")
+    assert not (tmp_path / "one" / "radiosity.rca").exists()
+    assert not (tmp_path / "one" / "radiosity.json").exists()
+    _povlens("render", scene, *SIZE, "--povray-option", "Radiosity_File_Name=own.rca",
+             "-o", tmp_path / "own", env=ONE_PER_RUN)
+    a = read_image(tmp_path / "own" / "image.exr")[..., :3]
+    b = read_image(tmp_path / "one" / "image.exr")[..., :3]
+    assert a.mean() > 0.05
+    assert abs(b.mean() / a.mean() - 1.0) < 0.03
+    assert np.sqrt(np.mean((a - b) ** 2)) < 0.03 * a.max()
