@@ -9,8 +9,10 @@ Finds Debian's povray-examples scenes whose ``global_settings`` hold ``radiosity
 ``photons`` (povlens's scene reader), keeps those POV-Ray renders through their own
 camera in under ``--limit-s`` at the first size, and for each size and sample count
 times ``povlens render`` with ``--method focal-blur``, ``--method mesh`` (what the
-samples share: the radiosity of one pretrace) and ``--method mesh`` with each sample
-computing its own (``--povray-option Radiosity_File_Name=...``, the uncached way). It
+samples share: several samples per POV-Ray run, the radiosity of one pretrace, one
+photon map) and ``--method mesh`` with each sample its own POV-Ray run computing its
+own radiosity (``POVLENS_STACK=1``, ``--povray-option Radiosity_File_Name=...``, the
+uncached way; photons stay shared: their map gives the per-sample image exactly). It
 reports the ratio mesh / focal_blur, and RMSE and FLIP of the shared render against the
 uncached one. One heavy job at a time: run it alone on the machine. Writes
 ``OUT.csv`` and ``OUT.txt``.
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import os
 import subprocess
 import sys
 import tempfile
@@ -52,10 +55,11 @@ def heavy_scenes(width: int, height: int) -> list[tuple[Path, str]]:
     return found
 
 
-def _timed(cmd: list[str], cwd: Path, timeout: float) -> tuple[float | None, str]:
+def _timed(cmd: list[str], cwd: Path, timeout: float, env=None) -> tuple[float | None, str]:
     t0 = time.perf_counter()
     try:
-        r = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+        r = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout,
+                           env={**os.environ, **(env or {})})
     except subprocess.TimeoutExpired:
         return None, "timeout"
     dt = time.perf_counter() - t0
@@ -72,7 +76,8 @@ def _render(scene: Path, out: Path, method: str, n: int, size, lens: str, extra=
     cmd = [sys.executable, "-m", "povlens", "render", scene.name, "--lens", lens,
            "--method", method, "--samples", str(n), "--width", str(size[0]),
            "--height", str(size[1]), "-q", "-o", str(out), *extra]
-    return _timed(cmd, scene.parent, 3600)
+    env = {"POVLENS_STACK": "1"} if extra == UNCACHED else {"POVLENS_STACK": ""}
+    return _timed(cmd, scene.parent, 3600, env)
 
 
 def measure(scene: Path, uses: str, size, n: int, lens: str, work: Path) -> dict:

@@ -100,9 +100,17 @@ def _field_mesh(opts: ConvertOptions, plan: Plan, st: PlanStart, placement, tabl
         plan.inputs = dataclasses.replace(plan.inputs, ray_mesh="pixel")
         plan.add_note(why_not)
         return
+    sized = bool(st.scene_size_uses)
+    if sized:   # the passes must render at the film's size (+ FS#261's row and column)
+        plan.field_mesh = dataclasses.replace(plan.field_mesh, interleave=1)
+        plan.add_note(f"the scene reads image_width/image_height ({st.scene_size_uses[0]}) "
+                      f"outside its camera, which POV-Ray sets to the size it renders: lens "
+                      f"samples render one pass per run at {film.width_px + 1}x"
+                      f"{film.height_px + 1} (POV-Ray 3.7's extra row and column), not "
+                      f"interleaved or stacked")
     from povlens.pov.field_mesh import pass_size
     wr, hr = pass_size(film.width_px, film.height_px, plan.field_mesh.interleave)
-    plan.povray = PovraySettings(plan.povray.version, wr, hr, 1, 1)
+    plan.povray = PovraySettings(plan.povray.version, wr, hr, 1, 1, image_size_read=sized)
 
 
 def _antialias_note(opts: ConvertOptions, st: PlanStart) -> str | None:

@@ -86,6 +86,7 @@ class PlanStart:
     scene_settings: tuple[str, ...] = ()   # the items of the scene's global_settings
     scene_photons: str | None = None       # its photons block's items (SceneCamera)
     scene_writes: tuple[str, ...] = ()     # where it opens files to write (SceneCamera)
+    scene_size_uses: tuple[str, ...] = ()  # where it reads image_width/height (SceneCamera)
     anamorphic: dict | None = None         # Plan.anamorphic (povlens.plan.anamorphic)
 
 
@@ -140,7 +141,8 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
                      + ana_notes,
                      () if cam is None else tuple(cam.global_settings),
                      None if cam is None else cam.photon_settings,
-                     () if cam is None else tuple(cam.written_files))
+                     () if cam is None else tuple(cam.written_files),
+                     () if cam is None else tuple(cam.image_size_uses))
     if ana is not None:
         start.anamorphic = anamorphic_record(ana, model, film, opts.film.desqueeze)
     return start

@@ -271,9 +271,15 @@ class PovraySettings:
     #: photon map shot with them (``RenderFolder.photon_map``;
     #: :mod:`povlens.rendering.photon_map`).
     photon_settings: str = ""
+    #: The scene reads ``image_width`` / ``image_height`` outside its camera: lens
+    #: samples render one pass per run at the film's size (no interleave, no stack;
+    #: :mod:`povlens.rendering.sample_stacks`).
+    image_size_read: bool = False
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
+        if not self.image_size_read:        # nor those before stacked samples
+            del d["image_size_read"]
         if not self.drop_right_columns:     # plans before field meshes had none
             del d["drop_right_columns"]
         if not self.radiosity_cache:        # nor those before the shared radiosity

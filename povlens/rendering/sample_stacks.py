@@ -28,7 +28,10 @@ mesh (docs/reference/povray-mesh-camera.md §3.3), so a pixel costs more as the 
 faces grow (about +0.6 us a pixel at 39 k faces, measured on raddem.pov);
 :data:`STACK_FACE_BUDGET` bounds a stack.  Plans it does not apply to render one pass
 per run, as before: per-pixel meshes (a face per pixel: a stack would multiply a large
-mesh) and adaptive plans (their samples render different rows).
+mesh), adaptive plans (their samples render different rows) and scenes that compute
+something from ``image_width`` / ``image_height`` outside their camera
+(``gamma/gamma_showcase.pov``'s one-pixel stripes), which POV-Ray sets to the size it
+renders (such a plan renders its passes at the film's size, not interleaved).
 """
 
 from __future__ import annotations
@@ -60,7 +63,7 @@ def stack_bands(plan: Plan) -> int:
     ``POVLENS_STACK`` overrides it (measurements)."""
     fm = plan.field_mesh
     H = plan.film.height_px
-    if fm is None or any(plan.rows_of_sample(k) != (0, H)
+    if fm is None or plan.povray.image_size_read or any(plan.rows_of_sample(k) != (0, H)
                          for k in range(int(plan.inputs.samples))):
         return 1
     forced = os.environ.get("POVLENS_STACK")

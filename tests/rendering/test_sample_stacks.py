@@ -119,3 +119,21 @@ def test_one_run_shares_its_own_pretrace_and_makes_no_file(tmp_path):
     assert a.mean() > 0.05
     assert abs(b.mean() / a.mean() - 1.0) < 0.03
     assert np.sqrt(np.mean((a - b) ** 2)) < 0.03 * a.max()
+
+
+@needs_povray
+def test_a_sample_rendered_alone_is_the_same_bits_as_in_its_stack(tmp_path):
+    """Resume renders one lost sample alone, in its band: its image is the one the
+    stacked run gave, bit for bit (the layout and the meshes' origin are the plan's)."""
+    scene = ROOT / "scenes" / "paper.pov"
+    out = tmp_path / "o"
+    _povlens("render", scene, *SIZE, "-o", out)
+    timing = json.loads((out / "samples" / "render.timing.json").read_text())
+    assert timing["bands"] >= 4 and timing["runs_together"]
+    first = read_image(out / "samples" / "sample_0002.exr")
+    for f in (out / "samples").glob("sample_0002.*"):
+        f.unlink()
+    _povlens("render", scene, *SIZE, "-o", out)
+    again = json.loads((out / "samples" / "render.timing.json").read_text())
+    assert again["samples"] == 1
+    assert np.array_equal(read_image(out / "samples" / "sample_0002.exr"), first)

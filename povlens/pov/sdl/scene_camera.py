@@ -64,6 +64,7 @@ import dataclasses
 import hashlib
 import math
 import os
+import re
 import threading
 from pathlib import Path
 from typing import Iterable, Mapping
@@ -127,6 +128,8 @@ class SceneCamera:
         their values); "" when povlens cannot repeat it whole; None without one.
     written_files : ``"file:line"`` of each ``#fopen`` that writes or appends a file
         while the scene is parsed.
+    image_size_uses : ``"file:line"`` of each ``image_width`` / ``image_height`` the
+        scene's files hold outside a camera block (:func:`image_size_uses`).
     """
 
     location: np.ndarray
@@ -148,6 +151,7 @@ class SceneCamera:
     global_settings: tuple[str, ...] = ()
     photon_settings: str | None = None
     written_files: tuple[str, ...] = ()
+    image_size_uses: tuple[str, ...] = ()
 
 
 def parse_scene_camera(
@@ -214,7 +218,8 @@ def parse_scene_camera(
                                 replaced=extra + _notes(cam, image_width, image_height),
                                 global_settings=notes.get("global_settings", ()),
                                 photon_settings=notes.get("photon_settings"),
-                                written_files=notes.get("written_files", ()))
+                                written_files=notes.get("written_files", ()),
+                                image_size_uses=notes.get("image_size_uses", ()))
     if files is not None:
         # the folders too: a file added there may shadow an include found elsewhere
         watched = [*files, path.parent, *libs]
@@ -259,6 +264,41 @@ def _copy(cam: SceneCamera) -> SceneCamera:
                                        if isinstance(getattr(cam, f.name), (np.ndarray, list))})
 
 
+_SIZE_WORD = re.compile(r"/\*.*?\*/|//[^\n]*|\"(?:[^\"\\\n]|\\.)*\"|\bcamera\b|[{}]|"
+                        r"\bimage_(?:width|height)\b", re.S)
+
+
+def image_size_uses(files) -> tuple[str, ...]:
+    """``"file:line"`` of each ``image_width`` / ``image_height`` in ``files`` outside a
+    ``camera { }`` block (comments and strings skipped): what a scene computes from the
+    size POV-Ray renders, which a mesh render's passes change
+    (:mod:`povlens.rendering.sample_stacks`)."""
+    out: list[str] = []
+    for f in dict.fromkeys(files):
+        try:
+            text = Path(f).read_text(errors="replace")
+        except OSError:
+            continue
+        depth, camera_at = 0, None     # brace depth; the depth a camera block opened at
+        pending = False
+        for m in _SIZE_WORD.finditer(text):
+            w = m.group(0)
+            if w == "camera":
+                pending = True
+            elif w == "{":
+                if pending and camera_at is None:
+                    camera_at = depth
+                pending = False
+                depth += 1
+            elif w == "}":
+                depth -= 1
+                if camera_at is not None and depth <= camera_at:
+                    camera_at = None
+            elif w.startswith("image_") and camera_at is None:
+                out.append(f"{f}:{text.count(chr(10), 0, m.start()) + 1}")
+    return tuple(out)
+
+
 def _read_camera(path: Path, image_width, image_height, libs, clock, declares
                  ) -> tuple[CameraState | None, dict]:
     """Walk the scene; the last camera statement, evaluated (None: there is none), and
@@ -273,7 +313,8 @@ def _read_camera(path: Path, image_width, image_height, libs, clock, declares
                    "files": None if reader.unread_includes else list(reader.included),
                    "global_settings": tuple(sorted(reader.global_settings)),
                    "photon_settings": reader.photon_settings,
-                   "written_files": tuple(reader.written_files)}
+                   "written_files": tuple(reader.written_files),
+                   "image_size_uses": image_size_uses(reader.included)}
     if cam is None:
         if reader.unread_includes:
             raise SceneCameraError(
