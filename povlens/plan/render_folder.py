@@ -180,6 +180,13 @@ class RenderFolder:
         return self.path / "radiosity.rca"
 
     @property
+    def radiosity_chain(self) -> Path:
+        """The radiosity samples a render's stacked runs hand on, each reading the
+        previous runs' and adding its own (:mod:`povlens.rendering.sample_stacks`);
+        deleted when the render ends."""
+        return self.samples / ".radiosity-chain.rca"
+
+    @property
     def photon_map(self) -> Path:
         """The photon map one pinhole render shoots and every lens sample loads
         (:mod:`povlens.rendering.photon_map`)."""

@@ -83,7 +83,7 @@ def _render_locked(outdir: Path, jobs: int | None, quiet: bool,
         with _progress(len(todo), "lens samples", quiet) as bar:
             timing = render_samples(plan, lens, table, outdir, 0, samples(),
                                     in_flight=in_flight, on_done=lambda: bar.update(1),
-                                    stacking=stack_plan(plan, todo, jobs))
+                                    stacking=stack_plan(plan, todo, jobs, chain=True))
         write_text(folder.timing("render"), json.dumps(timing) + "\n")
     mark_batches_done(outdir, plan)
     composite_outdir(outdir)

@@ -178,12 +178,14 @@ class _SampleRenders:
     ``sample_KKKK.exr`` when POV-Ray succeeds; its mesh is deleted then."""
 
     def __init__(self, plan: Plan, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT,
-                 on_done=None, threads: int = 1, one_run: bool = False):
+                 on_done=None, threads: int = 1, one_run: bool = False,
+                 chained: bool = False):
         self.plan, self.folder, self.batch = plan, RenderFolder(outdir), batch
         self.on_done = on_done
         self.samples = self.folder.samples
-        self.limit = max(1, int(limit))
+        self.limit = 1 if chained else max(1, int(limit))
         self.threads = max(1, int(threads))
+        self.chained = chained          # runs in turn, handing on their radiosity samples
         self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
         # first sample of a run -> (its samples, which are drawn, the stack's bands)
         self.stacks: dict[int, tuple[list[int], list[bool], int]] = {}
@@ -198,15 +200,23 @@ class _SampleRenders:
         chosen = sharing_chosen(outdir)
         # one run for every sample left: its own pretrace serves them all, so a file
         # made for it would only add a pinhole render (nothing to choose)
-        self.choosing = plan.povray.radiosity_cache and chosen is None and not one_run
-        if not self.choosing and (chosen is not None or not one_run):
+        self.choosing = (plan.povray.radiosity_cache and chosen is None and not one_run
+                         and not chained)
+        if chained:
+            self.folder.radiosity_chain.unlink(missing_ok=True)     # an earlier render's
+        elif not self.choosing and (chosen is not None or not one_run):
             self.radiosity = radiosity_read_args(radiosity_cache_for(plan, outdir),
                                                  self.samples)
 
     def _radiosity_args(self, k: int) -> list[str]:
         """Sample k's radiosity switches; while choosing, a probe's (module doc of
         :mod:`povlens.rendering.radiosity_cache`), after waiting for the choice when
-        both measurements are running."""
+        both measurements are running; chained runs read the samples of the runs
+        before them and save them with their own."""
+        if self.chained:
+            chain = self.folder.radiosity_chain
+            return [f"Radiosity_File_Name={os.path.relpath(chain, self.samples)}", "+RFO",
+                    *(["+RFI"] if chain.is_file() else [])]
         while self.choosing:
             kinds = [p for p in probes_missing(self.folder.path)
                      if p not in self.probes.values() and p not in self.measured]
@@ -291,6 +301,8 @@ class _SampleRenders:
     def _finished(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
         """POV-Ray exited, or wrote and closed its image (it then idles ~0.3 s
         before exiting: :func:`povlens.pov.process.povray_finished`)."""
+        if self.chained:    # it saves the radiosity samples it hands on as it exits
+            return proc.poll() is not None
         return povray_finished(proc, tmp / "f.exr", time.perf_counter() - self.running[k][2])
 
     def _reap(self, block: bool) -> None:
@@ -391,7 +403,7 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     if stacking is None or bands == 1:
         stacking = StackPlan(bands, 0, 1, False)
     queue = _SampleRenders(plan, outdir, batch, in_flight, on_done, stacking.threads,
-                           stacking.runs == 1)
+                           stacking.runs == 1, stacking.chained)
     seen: list[int] = []
     try:
         for ks in stack_runs(samples, bands, stacking.together):
@@ -425,9 +437,12 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     finally:
         for k in seen:
             RenderFolder(outdir).sample_mesh(k).unlink(missing_ok=True)
+        if stacking.chained:
+            RenderFolder(outdir).radiosity_chain.unlink(missing_ok=True)
     return {"samples": len(seen), "blocked": blocked, "rays_and_meshes_s": t_mesh,
             "povray_s": queue.povray_s, "wall_s": time.perf_counter() - t0,
-            "bands": bands, "runs_together": stacking.together, "threads": stacking.threads}
+            "bands": bands, "runs_together": stacking.together, "threads": stacking.threads,
+            "chained": stacking.chained}
 
 
 def render_batch(outdir: str | os.PathLike, batch: int,

@@ -12,7 +12,9 @@ faces of the passes the run renders
 per run, its radiosity samples serve every band (one process on every core shares
 them as focal_blur does), and :func:`split_stack` cuts the render into the images the
 passes have alone, so the rest of the pipeline (composite, resume, groups) sees
-ordinary samples.
+ordinary samples.  When ``povlens render``'s samples of a plan with radiosity need
+several stacks, the runs follow one another on every core and hand on their radiosity
+samples (:attr:`StackPlan.chained`; POV-Ray's ``+RFI +RFO`` on one file appends).
 
 The layout is the plan's, not the run's: p depends on the plan's field mesh only
 (:func:`stack_bands`), a pass always sits in the same band of a render of the same
@@ -89,19 +91,28 @@ class StackPlan:
     runs: int
     threads: int
     together: bool = True
+    #: The runs follow one another on every core, each reading the radiosity samples
+    #: of those before it (:meth:`RenderFolder.radiosity_chain`).
+    chained: bool = False
 
 
-def stack_plan(plan: Plan, todo, cores: int, together: bool = True) -> StackPlan:
+def stack_plan(plan: Plan, todo, cores: int, together: bool = True,
+               chain: bool = False) -> StackPlan:
     """How the samples ``todo`` (sample numbers) of ``plan`` render on ``cores`` cores:
     one run per stack they touch; when there are fewer runs than cores, each runs on
     several threads, so that one POV-Ray process shares its radiosity samples over
     every core as focal_blur does (``stackerday.pov``: a stack's second band computed
-    45 % of its radiosity lookups, the first 69 %)."""
+    45 % of its radiosity lookups, the first 69 %).  With ``chain`` (a render that
+    holds every sample: ``povlens render``) and a plan that shares radiosity, several
+    runs follow one another on every core, each reading the radiosity samples of those
+    before it, so that they are shared as in one process."""
     p = stack_bands(plan)
     todo = list(todo)
     runs = len({k // p for k in todo}) if together else len(todo)
     if p == 1:
         return StackPlan(1, len(todo), 1, together)
+    if chain and together and runs > 1 and plan.povray.radiosity_cache:
+        return StackPlan(p, runs, max(1, int(cores)), together, True)
     return StackPlan(p, runs, max(1, int(cores) // max(runs, 1)), together)
 
 

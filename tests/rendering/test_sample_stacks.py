@@ -137,3 +137,59 @@ def test_a_sample_rendered_alone_is_the_same_bits_as_in_its_stack(tmp_path):
     again = json.loads((out / "samples" / "render.timing.json").read_text())
     assert again["samples"] == 1
     assert np.array_equal(read_image(out / "samples" / "sample_0002.exr"), first)
+
+
+def test_image_size_words_outside_a_camera_are_found(tmp_path):
+    from povlens.pov.sdl.scene_camera import image_size_uses
+    inc = tmp_path / "size.inc"
+    inc.write_text('// image_width in a comment\n#declare S = "image_height";\n'
+                   "#declare Stripe = image_height * 2;\n")
+    scene = tmp_path / "s.pov"
+    scene.write_text('#include "size.inc"\n'
+                     "camera { location <0, 1, -3> right x*image_width/image_height\n"
+                     "  look_at <0, 0, 0> }\n/* image_width */ sphere { 0, 1 }\n")
+    assert image_size_uses([scene]) == ()          # in the camera, a comment: not used
+    assert image_size_uses([scene, inc]) == (f"{inc}:3",)
+
+
+@needs_povray
+def test_a_scene_reading_the_image_size_renders_passes_at_the_film_size(tmp_path):
+    """image_height outside the camera: the passes render at the film's size (no tiles,
+    no stack), with a note naming where."""
+    scene = tmp_path / "s.pov"
+    scene.write_text((ROOT / "scenes" / "paper.pov").read_text()
+                     + "#declare Rows = image_height;\n"
+                       "box { <-9, -1, 20>, <9, 0.001 * Rows, 21> pigment { rgb 0.5 } }\n")
+    args = ("--width", "160", "--height", "120", "--lens", "dgauss.50mm", "--method", "mesh",
+            "--samples", "2", "--focus", "4", "-q")
+    _povlens("render", scene, *args, "-o", tmp_path / "o")
+    plan = read_plan(tmp_path / "o")
+    assert plan.povray.image_size_read and plan.field_mesh.interleave == 1
+    assert (plan.povray.render_width, plan.povray.render_height) == (161, 121)
+    assert stack_bands(plan) == 1
+    assert any("image_width/image_height" in n and f"{scene}:" in n for n in plan.notes)
+    assert read_image(tmp_path / "o" / "image.exr").shape[:2] == (120, 160)
+    _povlens("convert", ROOT / "scenes" / "paper.pov", *args[:-1], "-o", tmp_path / "plain")
+    assert read_plan(tmp_path / "plain").field_mesh.interleave > 1     # what it changes
+
+
+@needs_povray
+def test_stacked_runs_hand_on_their_radiosity_samples(tmp_path):
+    """More samples than a stack holds: the runs follow one another on every core, each
+    reading the radiosity samples of those before it (POV-Ray's +RFI +RFO on one file
+    appends: measured on cornell.pov, the second run computed 1,043 samples against
+    5,165); the file is gone afterwards and the image is the per-sample one within
+    radiosity's noise."""
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    _povlens("render", scene, *SIZE, "-o", tmp_path / "chain", env={"POVLENS_STACK": "2"})
+    timing = json.loads((tmp_path / "chain" / "samples" / "render.timing.json").read_text())
+    assert timing["chained"] and timing["bands"] == 2 and timing["samples"] == 4
+    assert not list((tmp_path / "chain").rglob("*.rca"))
+    assert not (tmp_path / "chain" / "radiosity.json").exists()     # nothing to choose
+    _povlens("render", scene, *SIZE, "--povray-option", "Radiosity_File_Name=own.rca",
+             "-o", tmp_path / "own", env=ONE_PER_RUN)
+    a = read_image(tmp_path / "own" / "image.exr")[..., :3]
+    b = read_image(tmp_path / "chain" / "image.exr")[..., :3]
+    assert abs(b.mean() / a.mean() - 1.0) < 0.03
+    assert np.sqrt(np.mean((a - b) ** 2)) < 0.03 * a.max()
