@@ -393,7 +393,7 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     ``plan_for(k)`` the plan to trace sample k with (default ``plan``; plans that
     differ only in the sample count give the same sample k).  Returns timings: {samples, blocked,
     rays_and_meshes_s (Python), povray_s (summed over the overlapping processes),
-    wall_s, stack}.
+    wall_s, bands, runs_together, threads, chained}.
     """
     outdir = Path(outdir)
     t0 = time.perf_counter()
@@ -412,13 +412,12 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
                 break
             seen += ks
             t = time.perf_counter()
-            if plan.field_mesh is None or points is not None:
-                k = ks[0]
-                drawn = [_write_mesh(plan if plan_for is None else plan_for(k), lens, sampler,
-                                     outdir, k, points=None if points is None else points(k))]
+            run_plan = plan if plan_for is None else plan_for(ks[0])
+            if len(ks) == 1:
+                drawn = [_write_mesh(run_plan, lens, sampler, outdir, ks[0],
+                                     points=None if points is None else points(ks[0]))]
             else:
-                drawn = _write_stack(plan if plan_for is None else plan_for(ks[0]), lens,
-                                     sampler, outdir, ks, bands)
+                drawn = _write_stack(run_plan, lens, sampler, outdir, ks, bands)
             t_mesh += time.perf_counter() - t
             if any(drawn):
                 queue.start(ks[0], (ks, drawn, bands))
