@@ -4,14 +4,18 @@ The interpolation error of a field mesh (:mod:`povlens.pov.field_mesh`) is secon
 order in the face size, so from an error e0 measured at a trial grid of width g0 the
 width for a target e is about g0 sqrt(e0 / e).  Steps:
 
-1. **Encoding.**  Measure eps = 0.01 (tangent-plane interpolation, rectilinear
-   lenses) and eps = 1 (POV-Ray's plain normalised lerp, fisheyes) at the trial grid
-   over :data:`TRIAL_POINTS` pupil points; keep the smaller error.
-2. **Grid.**  Scale the width to :data:`TARGET_PX` by the square-root rule.
-3. **Certify.**  Measure the largest ray error over 17 pupil points (the centre, 8
-   at half the disc radius, 8 at 0.99 of it) on a regular subset of the pixels that
-   includes the frame's edges, with a sub-pixel offset off the pixel centre; while
-   it exceeds :data:`LIMIT_PX` (the issue's 0.05 px), refine and measure again.
+1. **Trial.**  Measure the largest ray error over the certification's 17 pupil points
+   (the centre, 8 at half the disc radius, 8 at 0.99 of it) at a trial grid of width
+   g0 with eps = 0.01 (tangent-plane interpolation, rectilinear lenses), on a regular
+   subset of :data:`CHECK_PIXELS` pixels that includes the frame's edges, with a
+   sub-pixel offset off the pixel centre.  Fisheyes (:data:`WIDE_DEG`) start with
+   eps = 1 (POV-Ray's plain normalised lerp) instead; where the error is far above
+   :data:`TARGET_PX`, the other encoding is measured too and the smaller kept.
+2. **Grid.**  Scale the width to :data:`TARGET_PX` by the square-root rule, finer, or
+   coarser by :data:`COARSER` at least (fewer faces make every pass cheaper:
+   :func:`interleave_for`).
+3. **Certify.**  Measure the grid's error as in step 1; while it exceeds
+   :data:`LIMIT_PX` (the issue's 0.05 px), refine and measure again.
 
 The error is the angle between the ray POV-Ray traces (:func:`povlens.pov.field_emulation.emulate`)
 and the exact one, times the focal length over the pixel pitch, wherever the lens
@@ -36,10 +40,14 @@ __all__ = ["choose_field_mesh", "certification_pupil_points", "pixel_subset", "i
 #: The ray error the grid is sized for, and the most a certified plan may keep.
 TARGET_PX = 0.035
 LIMIT_PX = 0.05
-#: Direction encodings tried (module docstring, step 1).
+#: Direction encodings (module docstring, step 1): the first for most lenses, the
+#: second first for lenses whose paraxial half-diagonal field exceeds WIDE_DEG; the
+#: other one is measured too when the first misses the target by more than
+#: OTHER_ENCODING_ABOVE times (fisheye.10mm at 640x480, 24x18 faces: eps = 0.01 keeps
+#: 75 px, eps = 1 0.26 px; tessar.50mm: 0.021 px with eps = 0.01).
 EPS_CHOICES = (0.01, 1.0)
-#: Pupil points (as u in [0,1)^2) of the encoding trial: centre and two near the rim.
-TRIAL_POINTS = ((0.5, 0.5), (0.995, 0.5), (0.5, 0.005))
+WIDE_DEG = 55.0
+OTHER_ENCODING_ABOVE = 10.0
 #: The certification's sub-pixel offset (not a pixel centre).
 CHECK_JITTER = (0.37, 0.61)
 #: Pixels compared per pupil point (a regular subset with the edges).
@@ -56,9 +64,10 @@ def certification_pupil_points(radius_mm: float = 1.0) -> np.ndarray:
 
 
 def pixel_subset(width: int, height: int, n: int = CHECK_PIXELS) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column indices of about ``n`` pixels on a regular lattice that
-    includes the first and last rows and columns (every pixel when n >= W H)."""
-    step = max(1, int(math.floor(math.sqrt(width * height / n))))
+    """Row and column indices of at most about ``n`` pixels (and more than n / 4) on a
+    regular lattice that includes the first and last rows and columns (every pixel
+    when n >= W H)."""
+    step = max(1, int(math.ceil(math.sqrt(width * height / n))))
     cols = np.union1d(np.arange(0, width, step), [width - 1])
     rows = np.union1d(np.arange(0, height, step), [height - 1])
     R, C = np.meshgrid(rows, cols, indexing="ij")
@@ -94,8 +103,9 @@ def _max_error(ctx, grid, eps, points, rows, cols, exact_cache) -> tuple[float, 
     return worst, worst_origin
 
 
-#: A grid whose certified error is below this share of :data:`TARGET_PX` is coarsened once.
-SHRINK_BELOW = 0.6
+#: A certified grid is coarsened (and measured again) only to this share of its width
+#: or less: a face column or two fewer does not pay for another measurement.
+COARSER = 0.9
 #: Faces a pass may hold in all (m^2 tiles of the grid's): POV-Ray 3.7 finds a pixel's
 #: face by testing, in order, the faces that share its cell of a fixed 10 x 10 UV grid,
 #: so a pass costs more with more faces (docs/decisions/exact-lens-distribution3.md).
@@ -154,30 +164,26 @@ def choose_field_mesh(lens, film_distance_mm: float, film, table, placement, efl
     pa = film.pixel_pitch_mm / abs(efl_mm)
     ctx = (lens, film_distance_mm, film, table.plane_z_mm, placement, pa, model, domain)
     rows, cols = pixel_subset(W, H)
-    trial = [concentric_disc_mm(np.array(u), 1.0) for u in TRIAL_POINTS]
+    points = certification_pupil_points()
     g0 = _grid_for_width(int(math.ceil(24 * math.sqrt(W / 640.0))), W, H)
     cache: dict = {}
-    trials = {eps: _max_error(ctx, g0, eps, trial, rows, cols, cache)[0] for eps in EPS_CHOICES}
-    eps = min(trials, key=trials.get)
-    e0 = trials[eps]
-    gx = g0[0] if e0 <= TARGET_PX else int(math.ceil(g0[0] * math.sqrt(e0 / TARGET_PX)))
-    points = certification_pupil_points()
-    for _ in range(4):
-        grid = _grid_for_width(gx, W, H)
-        err, origin = _max_error(ctx, grid, eps, points, rows, cols, cache)
-        if err <= LIMIT_PX or grid[0] >= _grid_limit(W):
+    measured = {}                       # (grid, eps) -> (error px, origin error mm)
+    wide = math.degrees(math.atan(film.max_field_radius_mm / abs(efl_mm))) > WIDE_DEG
+    for eps in (EPS_CHOICES[::-1] if wide else EPS_CHOICES):
+        measured[g0, eps] = _max_error(ctx, g0, eps, points, rows, cols, cache)
+        if measured[g0, eps][0] <= OTHER_ENCODING_ABOVE * TARGET_PX:
             break
-        gx = int(math.ceil(grid[0] * math.sqrt(err / TARGET_PX) * 1.05))
-    if err < SHRINK_BELOW * TARGET_PX and grid[0] > 4:
-        # finer than the target needs (the rule overshot from a coarse trial, or the
-        # trial grid was already fine): once more from this grid's own error, kept if
-        # it still certifies; fewer faces make every pass cheaper (interleave_for)
-        smaller = _grid_for_width(int(math.ceil(grid[0] * math.sqrt(err / TARGET_PX) * 1.05)),
-                                  W, H)
-        if smaller[0] < grid[0]:
-            err2, origin2 = _max_error(ctx, smaller, eps, points, rows, cols, cache)
-            if err2 <= LIMIT_PX:
-                grid, err, origin = smaller, err2, origin2
+    (grid, eps), (err, origin) = min(measured.items(), key=lambda item: item[1][0])
+    for _ in range(5):
+        # the square-root rule from the last measurement, with a 5 % margin
+        nxt = _grid_for_width(int(math.ceil(grid[0] * math.sqrt(err / TARGET_PX) * 1.05)), W, H)
+        certified = err <= LIMIT_PX
+        if (nxt[0] > COARSER * grid[0]) if certified else (nxt[0] <= grid[0]):
+            break       # certified and not much coarser asked, or no finer allowed
+        e2 = _max_error(ctx, nxt, eps, points, rows, cols, cache)
+        if certified and e2[0] > LIMIT_PX:
+            break                   # coarser no longer certifies: keep the last
+        grid, (err, origin) = nxt, e2
     if err > LIMIT_PX:
         return None, (f"interpolated ray meshes of this lens keep a ray error of {err:.3g} px "
                       f"at {grid[0]}x{grid[1]} faces (limit {LIMIT_PX} px), so its lens samples "
