@@ -13,7 +13,7 @@ pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray 
 
 def test_bench_quick_tiny(tmp_path, capsys):
     code = main(["bench", "--quick", "--width", "24", "--height", "18", "--lenses",
-                 "dgauss.50mm", "--samples", "4,16", "--reference-samples", "32",
+                 "dgauss.50mm", "--samples", "2,8", "--reference-samples", "16",
                  "--pbrt-rays", "4096", "--tracer-rays", "0", "--out", str(tmp_path)])
     assert code == 0
     with open(tmp_path / "time_error_quick.csv") as f:
@@ -23,11 +23,11 @@ def test_bench_quick_tiny(tmp_path, capsys):
     want = sorted((m, "dgauss.50mm", n) for m in ("naive-random", "pbrt-random",
                                                    "povlens-sobol", "focal-blur",
                                                    "povlens-field")
-                  for n in (4, 16))
+                  for n in (2, 8))
     assert got == want
     assert all(float(r["seconds"]) > 0 and float(r["rmse"]) > 0 for r in rows)
     c = {int(r["samples"]): float(r["rmse"]) for r in rows if r["method"] == "povlens-sobol"}
-    assert c[16] < c[4]
+    assert c[8] < c[2]
     assert (tmp_path / "time_error_quick.png").stat().st_size > 0
     assert "time to equal rmse" in (tmp_path / "time_error_quick.txt").read_text()
     assert "focal_blur error floor" in capsys.readouterr().out

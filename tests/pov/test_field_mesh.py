@@ -261,9 +261,9 @@ def test_povray_traces_the_emulated_rays(tmp_path):
 
 
 @needs_povray
-def test_thin_lens_field_meshes_match_focal_blur_at_320x240(tmp_path):
+def test_thin_lens_field_meshes_match_focal_blur_at_240x180(tmp_path):
     from tests.pov.test_mesh import LOC, SCENE, basis, box_filter
-    W, H = 320, 240
+    W, H = 240, 180
     aperture, focal = 1.2, 7.0          # POV-Ray aperture = 2 x lens diameter
     d, r, u = basis(W, H)
     (tmp_path / "scene.pov").write_text(SCENE)
@@ -288,8 +288,8 @@ def test_thin_lens_field_meshes_match_focal_blur_at_320x240(tmp_path):
             total += read_image(out)[1:, :W, :3]
         return total / n
 
-    good = [lens("a", aperture / 4, 16, 1), lens("b", aperture / 4, 16, 2)]
-    wrong = lens("w", aperture / 2, 16, 3)       # diameter = aperture: the classic mistake
+    good = [lens("a", aperture / 4, 12, 1), lens("b", aperture / 4, 12, 2)]
+    wrong = lens("w", aperture / 2, 12, 3)       # diameter = aperture: the classic mistake
 
     def err(a, b):
         return float(np.abs(box_filter(a) - box_filter(b)).mean())
