@@ -48,13 +48,15 @@ __all__ = ["UVModel", "uv_model", "pass_models", "pass_size", "pass_rows", "dein
            "FieldMesh", "MeshPoints", "mesh_points", "build_field_meshes", "encode_field_mesh",
            "take_rays",
            "PassMesh", "combine_meshes", "lens_ray_field", "build_field_mesh", "mesh2_text",
-           "placement_text", "FIT_SUBDIVISION", "MESH_NAME", "TRANSFORM_NAME"]
+           "placement_text", "FIT_SUBDIVISION", "MESH_NAME", "TRANSFORM_NAME",
+           "EYE_NAME", "seen_from", "eye_text"]
 
 #: The fit's sample grid is this many times finer than the mesh.
 FIT_SUBDIVISION = 3
 
 MESH_NAME = "PovlensRays"
 TRANSFORM_NAME = "PovlensPlace"
+EYE_NAME = "PovlensEye"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -531,6 +533,37 @@ def mesh2_text(mesh: FieldMesh | PassMesh, name: str = MESH_NAME) -> str:
             f"normal_vectors {{ {len(mesh.normal)},\n{_rows(mesh.normal, '%.9g')}\n}}\n"
             f"uv_vectors {{ {len(mesh.uv)},\n{_rows(mesh.uv, '%.9g')}\n}}\n"
             f"face_indices {{ {len(mesh.faces)},\n{_rows(mesh.faces, '%d')}\n}}\n}}\n")
+
+
+def seen_from(mesh: PassMesh, eye_world) -> PassMesh:
+    """The mesh for a camera whose ``location`` is ``eye_world`` (3,), drawing the
+    same rays.
+
+    POV-Ray measures radiosity's reuse distances from the camera's ``location``
+    (``to_eye`` in ``RadiosityFunction::GatherLight``), which a mesh camera leaves at
+    the world origin unless given, so its radiosity would follow the distance from
+    the origin, not from the lens (a sample per pixel where the scene's own camera
+    reuses them).  But a mesh camera also moves each ray's origin by ``location.z``
+    along the interpolated vertex normal, in mesh space (reference §2.3).  So each
+    vertex is moved back by ``location.z`` times its own normal: the interpolated
+    origin then lands where it was, up to the normalisation of the interpolated
+    normal (below 1e-7 of ``location.z`` across a face of an eps = 0.01 mesh, and
+    along the ray with eps = 1).  The common part, ``location.z`` along the mesh's
+    z axis, goes into the matrix's translation, so the float32 vertices stay small.
+    Depends only on the mesh and the eye, so a pass is the same bits in any stack.
+    """
+    lz = float(np.asarray(eye_world, float)[2])
+    axis = np.array([0.0, 0.0, 1.0])
+    matrix = mesh.matrix.copy()
+    matrix[3] = mesh.matrix[3] - lz * (axis @ mesh.matrix[:3])
+    return dataclasses.replace(mesh, vertex=mesh.vertex - lz * (mesh.normal - axis),
+                               matrix=matrix)
+
+
+def eye_text(eye_world, name: str = EYE_NAME) -> str:
+    """``#declare NAME = <x, y, z>;``: the camera ``location`` of :func:`seen_from`."""
+    x, y, z = (float(v) for v in eye_world)
+    return f"#declare {name} = <{x:.17g}, {y:.17g}, {z:.17g}>;\n"
 
 
 def placement_text(mesh: FieldMesh | PassMesh, name: str = TRANSFORM_NAME) -> str:

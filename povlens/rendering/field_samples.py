@@ -26,8 +26,8 @@ import numpy as np
 
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
-from povlens.pov.field_mesh import (build_field_meshes, combine_meshes, deinterleave,
-                                    mesh2_text, pass_models, pass_rows, placement_text)
+from povlens.pov.field_mesh import (build_field_meshes, combine_meshes, deinterleave, eye_text,
+                                    mesh2_text, pass_models, pass_rows, placement_text, seen_from)
 from povlens.pupil.field import (PupilMap, concentric_disc_mm, field_sample_points, field_weight,
                                  tile_points, trace_field)
 from povlens.pupil.field_domain import FieldDomain, disc_domain
@@ -204,11 +204,13 @@ def write_field_stack(plan: Plan, lens, table, outdir: Path, ks, inc: Path,
               for k in ks]
     drawn = [m for m in meshes if m is not None]
     if drawn:
-        one = combine_meshes(drawn)
+        eye = plan.povray_camera.location       # the scene camera's: radiosity's eye
+        one = seen_from(combine_meshes(drawn), eye)
         part = RenderFolder(outdir).partial(inc)
         with open(part, "w") as f:
             f.write(mesh2_text(one))
             f.write(placement_text(one))
+            f.write(eye_text(eye))
         os.replace(part, inc)
     return [m is not None for m in meshes]
 
