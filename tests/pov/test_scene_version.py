@@ -115,6 +115,7 @@ def test_mesh_wrappers_render_the_scene_as_povray_does(scene):
                        np.ones((H, W), bool), sink_centre=sink)
     with open(folder / "sample_0000.inc", "a") as f:
         f.write(f"#declare PovlensTranslate = {pov_vector(t)};\n")
+        f.write(f"#declare PovlensEye = {pov_vector(LOC)};\n")   # the scene camera's
     from povlens.plan.render_folder import RenderFolder
     batch = write_text(folder / "batch.pov", read_template("mesh_batch.pov.tmpl").substitute(
         RenderFolder.mesh_include_names(), scene_include='"scene.pov"',
