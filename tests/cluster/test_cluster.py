@@ -178,8 +178,6 @@ def test_a_worker_killed_mid_render_loses_nothing(cluster, local_image, tmp_path
     from distributed import Client
     victim = cluster.add_worker()
     cluster.wait_for_workers(3)
-    out = tmp_path / "o"
-    povlens.convert(SCENE, outdir=out, **RENDER)
     in_flight = []
 
     with Client(cluster.address, timeout="30s", set_as_default=False) as monitor:
@@ -188,7 +186,7 @@ def test_a_worker_killed_mid_render_loses_nothing(cluster, local_image, tmp_path
         def kill_when_busy():
             # as soon as the victim is rendering a group, kill it
             deadline = time.monotonic() + 60
-            while time.monotonic() < deadline and not in_flight:
+            while time.monotonic() < deadline and not in_flight and not done.is_set():
                 busy = monitor.processing([addr]).get(addr, [])
                 if busy:
                     in_flight.extend(busy)
@@ -196,10 +194,20 @@ def test_a_worker_killed_mid_render_loses_nothing(cluster, local_image, tmp_path
                     victim.wait(timeout=30)
                 time.sleep(0.01)
 
-        killer = threading.Thread(target=kill_when_busy, daemon=True)
-        killer.start()
-        _, stats = render_outdir_on_cluster(out, cluster.address, group_size=2)
-        killer.join(timeout=60)
+        # the scheduler may leave the victim idle through a render (the other workers
+        # took its groups first, as under the load of a parallel test run): render again
+        # into a fresh folder until it was killed mid-render
+        for attempt in range(4):
+            out = tmp_path / f"o{attempt}"
+            povlens.convert(SCENE, outdir=out, **RENDER)
+            done = threading.Event()
+            killer = threading.Thread(target=kill_when_busy, daemon=True)
+            killer.start()
+            _, stats = render_outdir_on_cluster(out, cluster.address, group_size=2)
+            done.set()
+            killer.join(timeout=60)
+            if in_flight:
+                break
     assert in_flight, "the victim had no group in flight when it was killed"
     tasks = stats["tasks"]
     lost = {tuple(task_samples(key)) for key in in_flight}
