@@ -48,15 +48,13 @@ __all__ = ["UVModel", "uv_model", "pass_models", "pass_size", "pass_rows", "dein
            "FieldMesh", "MeshPoints", "mesh_points", "build_field_meshes", "encode_field_mesh",
            "take_rays",
            "PassMesh", "combine_meshes", "lens_ray_field", "build_field_mesh", "mesh2_text",
-           "placement_text", "FIT_SUBDIVISION", "MESH_NAME", "TRANSFORM_NAME",
-           "EYE_NAME", "seen_from", "eye_text"]
+           "placement_text", "FIT_SUBDIVISION", "MESH_NAME", "TRANSFORM_NAME", "seen_from"]
 
 #: The fit's sample grid is this many times finer than the mesh.
 FIT_SUBDIVISION = 3
 
 MESH_NAME = "PovlensRays"
 TRANSFORM_NAME = "PovlensPlace"
-EYE_NAME = "PovlensEye"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -558,12 +556,6 @@ def seen_from(mesh: PassMesh, eye_world) -> PassMesh:
     matrix[3] = mesh.matrix[3] - lz * (axis @ mesh.matrix[:3])
     return dataclasses.replace(mesh, vertex=mesh.vertex - lz * (mesh.normal - axis),
                                matrix=matrix)
-
-
-def eye_text(eye_world, name: str = EYE_NAME) -> str:
-    """``#declare NAME = <x, y, z>;``: the camera ``location`` of :func:`seen_from`."""
-    x, y, z = (float(v) for v in eye_world)
-    return f"#declare {name} = <{x:.17g}, {y:.17g}, {z:.17g}>;\n"
 
 
 def placement_text(mesh: FieldMesh | PassMesh, name: str = TRANSFORM_NAME) -> str:

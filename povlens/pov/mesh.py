@@ -57,6 +57,8 @@ __all__ = [
     "default_sink_centre",
     "write_ray_mesh",
     "mesh_camera_block",
+    "EYE_NAME",
+    "eye_text",
     "mesh_wrapper",
     "focal_blur_wrapper",
     "pinhole_wrapper",
@@ -329,6 +331,18 @@ def _mesh2_text(name: str, w: int, h: int, ray_int: np.ndarray, sink32: np.ndarr
 
 # ---------------------------------------------------------------------------
 # camera blocks and wrapper scenes
+
+
+#: The identifier of a lens sample's mesh-camera ``location`` in its ``.inc``.
+EYE_NAME = "PovlensEye"
+
+
+def eye_text(eye_world, name: str = EYE_NAME) -> str:
+    """``#declare NAME = <x, y, z>;``: a mesh camera's ``location``, the scene camera's,
+    from which POV-Ray measures radiosity's reuse distances (the batch templates;
+    :func:`povlens.pov.field_mesh.seen_from` for what it does to field meshes)."""
+    x, y, z = (float(v) for v in eye_world)
+    return f"#declare {name} = <{x:.17g}, {y:.17g}, {z:.17g}>;\n"
 
 
 def mesh_camera_block(

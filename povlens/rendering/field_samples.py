@@ -26,8 +26,9 @@ import numpy as np
 
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
-from povlens.pov.field_mesh import (build_field_meshes, combine_meshes, deinterleave, eye_text,
+from povlens.pov.field_mesh import (build_field_meshes, combine_meshes, deinterleave,
                                     mesh2_text, pass_models, pass_rows, placement_text, seen_from)
+from povlens.pov.mesh import eye_text
 from povlens.pupil.field import (PupilMap, concentric_disc_mm, field_sample_points, field_weight,
                                  tile_points, trace_field)
 from povlens.pupil.field_domain import FieldDomain, disc_domain
