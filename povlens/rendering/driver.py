@@ -27,7 +27,8 @@ from povlens.plan.schema import Plan, read_plan
 from povlens.rendering.folder_composite import composite_outdir
 from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, mark_batches_done, render_samples
-from povlens.rendering.sample_stacks import stack_plan
+from povlens.rendering.run_choice import choose_runs
+from povlens.rendering.sample_stacks import StackPlan, stack_plan
 from povlens.rendering.views import render_view
 from povlens.util.files import write_text
 
@@ -74,20 +75,87 @@ def _render_locked(outdir: Path, jobs: int | None, quiet: bool,
         lens = lens_for(plan)
         table = pupil_table_for(outdir, plan, lens)
 
-        def samples():
-            yield from todo
+        def samples(ks):
+            yield from ks
             # every sample is written and its POV-Ray started: the composite's
             # exposure is computed while they run (not after)
             exposure_for(outdir, plan, lens, table)
 
         with _progress(len(todo), "lens samples", quiet) as bar:
-            timing = render_samples(plan, lens, table, outdir, 0, samples(),
-                                    in_flight=in_flight, on_done=lambda: bar.update(1),
-                                    stacking=stack_plan(plan, todo, jobs, chain=True))
+            timing = _render_mesh_samples(plan, lens, table, outdir, todo, samples, jobs,
+                                          in_flight, lambda: bar.update(1))
         write_text(folder.timing("render"), json.dumps(timing) + "\n")
     mark_batches_done(outdir, plan)
     composite_outdir(outdir)
     return folder.image_exr
+
+
+def _render_mesh_samples(plan: Plan, lens, table, outdir: Path, todo: list[int], samples,
+                         jobs: int, in_flight: int, on_done) -> dict:
+    """Render the lens samples ``todo`` of ``povlens render`` (``samples(ks)`` yields
+    them); returns the timing record.  A plan whose samples stack renders the first
+    alone on every core and lets it choose between stacks and one run each for the
+    rest (:mod:`povlens.rendering.run_choice`); its radiosity samples go on to the
+    stacks (:meth:`RenderFolder.radiosity_chain`)."""
+    stacking = stack_plan(plan, todo, jobs, chain=True)
+    if stacking.bands == 1 or len(todo) < 2 or os.environ.get("POVLENS_STACK"):
+        return render_samples(plan, lens, table, outdir, 0, samples(todo), in_flight=in_flight,
+                              on_done=on_done, stacking=stacking)
+    p = stacking.bands
+    radiosity = bool(plan.povray.radiosity_cache)
+    chain = RenderFolder(outdir).radiosity_chain
+    chain.unlink(missing_ok=True)           # an earlier render's
+    exiting: list = []      # the lead's POV-Ray, saving its radiosity samples as it exits
+    try:
+        lead = render_samples(plan, lens, table, outdir, 0, todo[:1], in_flight=in_flight,
+                              on_done=on_done, stacking=StackPlan(p, 1, jobs, False, radiosity),
+                              statistics=True, keep_chain=True, exiting=exiting)
+        rest = todo[1:]
+        choice = _run_choice(plan, lead, rest, p, jobs)
+        if choice is None or choice.stack:
+            runs = len({k // p for k in rest})
+            threads = jobs if radiosity else max(1, jobs // runs)
+            stacking = StackPlan(p, runs, threads, True, radiosity)
+        else:               # the lead's radiosity samples are not read: no need to wait
+            stacking = StackPlan(p, len(rest), 1, False)
+            _stop(exiting)
+        timing = render_samples(plan, lens, table, outdir, 0, samples(rest), in_flight=in_flight,
+                                on_done=on_done, stacking=stacking, keep_chain=True,
+                                own_radiosity=not stacking.together, wait_first=exiting)
+    finally:
+        _stop(exiting)
+        chain.unlink(missing_ok=True)
+    stats = lead.pop("statistics")
+    lead["statistics"] = {str(k): {"wall_s": round(w, 4), **st.as_dict()}
+                          for k, (w, st) in stats.items()}
+    timing.update(samples=timing["samples"] + lead["samples"],
+                  blocked=timing["blocked"] + lead["blocked"], lead=lead,
+                  choice=None if choice is None else choice.as_dict())
+    return timing
+
+
+def _stop(processes: list) -> None:
+    """Kill the POV-Ray processes left (SIGKILL: what is left of them is their idle
+    shutdown) and empty the list."""
+    while processes:
+        proc = processes.pop()
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+
+
+def _run_choice(plan: Plan, lead: dict, rest: list[int], bands: int, jobs: int):
+    """:func:`~povlens.rendering.run_choice.choose_runs` from the lead's timing (None:
+    its rays were all blocked, nothing was measured)."""
+    if not lead["statistics"] or not rest:
+        return None
+    (wall_s, stats), = lead["statistics"].values()
+    pv, fm = plan.povray, plan.field_mesh
+    pass_pixels = (pv.render_width - pv.drop_right_columns) * (pv.render_height
+                                                               - pv.drop_top_rows)
+    faces = 2 * int(fm.grid[0]) * int(fm.grid[1]) * int(fm.interleave) ** 2
+    return choose_runs(stats, wall_s, lead["rays_and_meshes_s"], len(rest), pass_pixels,
+                       faces * min(bands, len(rest)), jobs)
 
 
 class EarlyRender:

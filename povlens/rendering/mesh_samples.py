@@ -42,8 +42,11 @@ from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pov.executable import find_povray
 from povlens.pov.mesh import eye_text, write_ray_mesh
 from povlens.pov.povray_output import povray_failure
-from povlens.pov.process import (pixel_range_args, povray_command, povray_finished,
-                                 render_switches, start_povray)
+from povlens.pov.render_statistics import (STATISTICS_SWITCHES, render_statistics,
+                                           statistics_complete)
+from povlens.pov.process import (FIRST_OUTPUT_S, output_written, pixel_range_args,
+                                 povray_command, povray_finished, render_switches,
+                                 start_povray)
 from povlens.pupil.rays import sample_points, sample_rays
 from povlens.rendering.field_samples import (placement_of, render_rows, sample_lens,
                                              write_field_stack)
@@ -54,7 +57,7 @@ from povlens.util.images import write_exr
 from povlens.rendering.photon_map import photon_load_args, photon_map_for
 from povlens.rendering.sample_stacks import (StackPlan, split_stack, stack_bands, stack_plan,
                                              stack_row_args, stack_runs)
-from povlens.rendering.radiosity_cache import (STATISTICS_SWITCHES, choice_from,
+from povlens.rendering.radiosity_cache import (choice_from,
                                                probe_measurement, probes_missing,
                                                radiosity_cache_for, radiosity_read_args,
                                                record_probes, sharing_chosen)
@@ -193,13 +196,26 @@ class _SampleRenders:
 
     def __init__(self, plan: Plan, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT,
                  on_done=None, threads: int = 1, one_run: bool = False,
-                 chained: bool = False):
+                 chained: bool = False, statistics: bool = False,
+                 own_radiosity: bool = False, keep_chain: bool = False,
+                 exiting: list | None = None, wait_first=()):
         self.plan, self.folder, self.batch = plan, RenderFolder(outdir), batch
         self.on_done = on_done
         self.samples = self.folder.samples
         self.limit = 1 if chained else max(1, int(limit))
         self.threads = max(1, int(threads))
         self.chained = chained          # runs in turn, handing on their radiosity samples
+        # POV-Ray's statistics of each run, waited for as it exits: first sample -> (its
+        # run's wall time, RenderStatistics)
+        self.statistics = statistics
+        self.run_statistics: dict[int, tuple[float, object]] = {}
+        # runs whose image and statistics are in while POV-Ray still idles before it
+        # exits: killed, or, chained, handed to ``exiting`` (it saves its radiosity
+        # samples as it exits; the caller waits for it or kills it, or passes it in
+        # ``wait_first`` to a later render, whose first run starts once it has exited)
+        self.exiting = exiting
+        self.early: set[int] = set()
+        self.wait_first: list[subprocess.Popen] = list(wait_first)
         self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
         # first sample of a run -> (its samples, which are drawn, the stack's bands)
         self.stacks: dict[int, tuple[list[int], list[bool], int]] = {}
@@ -215,10 +231,11 @@ class _SampleRenders:
         # one run for every sample left: its own pretrace serves them all, so a file
         # made for it would only add a pinhole render (nothing to choose)
         self.choosing = (plan.povray.radiosity_cache and chosen is None and not one_run
-                         and not chained)
-        if chained:
+                         and not chained and not own_radiosity)
+        if chained and not keep_chain:
             self.folder.radiosity_chain.unlink(missing_ok=True)     # an earlier render's
-        elif not self.choosing and (chosen is not None or not one_run):
+        elif not self.choosing and not own_radiosity and not chained and (
+                chosen is not None or not one_run):
             self.radiosity = radiosity_read_args(radiosity_cache_for(plan, outdir),
                                                  self.samples)
 
@@ -281,6 +298,8 @@ class _SampleRenders:
         stack whose first is k (:mod:`povlens.rendering.sample_stacks`)."""
         while len(self.running) >= self.limit:
             self._reap(block=True)
+        while self.wait_first:      # an earlier run still saving the radiosity this one reads
+            self.wait_first.pop().wait()
         self.stacks[k] = stack or ([k], [True], 1)
         radiosity = self._radiosity_args(k)
         pv = self.plan.povray
@@ -297,6 +316,7 @@ class _SampleRenders:
                 library_paths=[Path(self.plan.inputs.scene).parent],
                 povray_options=self.povray_options,
                 extra_args=[*MESH_SWITCHES, *radiosity, *self.photons,
+                            *(STATISTICS_SWITCHES if self.statistics else ()),
                             f"Declare=PovlensFrame={k}", *rows])
             cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
             with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:
@@ -315,9 +335,32 @@ class _SampleRenders:
     def _finished(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
         """POV-Ray exited, or wrote and closed its image (it then idles ~0.3 s
         before exiting: :func:`povlens.pov.process.povray_finished`)."""
+        if self.statistics:
+            return self._statistics_in(k, proc, tmp)
         if self.chained:    # it saves the radiosity samples it hands on as it exits
             return proc.poll() is not None
         return povray_finished(proc, tmp / "f.exr", time.perf_counter() - self.running[k][2])
+
+    def _statistics_in(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
+        """POV-Ray exited, or printed its statistics and closed its image (it then idles
+        ~0.35 s before it exits, saving the radiosity samples it hands on)."""
+        if proc.poll() is not None:
+            return True
+        if time.perf_counter() - self.running[k][2] < FIRST_OUTPUT_S:
+            return False
+        try:
+            text = (tmp / "stderr.txt").read_text(errors="replace")
+        except OSError:
+            return False
+        if not (statistics_complete(text) and output_written(proc.pid, tmp / "f.exr")):
+            return False
+        if self.chained and self.exiting is not None:
+            self.exiting.append(proc)
+        else:
+            proc.kill()
+            proc.wait()
+        self.early.add(k)
+        return True
 
     def _reap(self, block: bool) -> None:
         while True:
@@ -342,7 +385,7 @@ class _SampleRenders:
     def _collect(self, k: int, proc: subprocess.Popen, tmp: Path) -> None:
         pov = self.folder.batch_wrapper(self.batch)
         out = tmp / "f.exr"
-        if proc.returncode != 0 or not out.exists():
+        if (proc.returncode != 0 and k not in self.early) or not out.exists():
             # its real cause: a full disk, a parse error in the wrapper, or the scene
             stderr = (tmp / "stderr.txt").read_text(errors="replace")
             raise povray_failure(pov, self.samples, proc.returncode, stderr, "",
@@ -354,6 +397,9 @@ class _SampleRenders:
             os.replace(out, self.folder.sample_image(k))
         else:
             split_stack(self.plan, out, self.folder.path, ks, drawn, bands)
+        if self.statistics:
+            self.run_statistics[k] = (time.perf_counter() - self.running[k][2], render_statistics(
+                (tmp / "stderr.txt").read_text(errors="replace")))
         kind = self.probes.pop(k, None)
         if kind is not None and self.choosing:
             self.measured[kind] = probe_measurement(
@@ -386,7 +432,10 @@ class _SampleRenders:
 
 def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: int,
                    samples, points=None, in_flight: int = POVRAY_IN_FLIGHT,
-                   stop=None, on_done=None, plan_for=None, stacking=None) -> dict:
+                   stop=None, on_done=None, plan_for=None, stacking=None,
+                   statistics: bool = False, own_radiosity: bool = False,
+                   keep_chain: bool = False, exiting: list | None = None,
+                   wait_first=()) -> dict:
     """Trace, write and render lens samples ``samples`` of batch ``batch``, pipelined.
 
     For each sample in turn: trace its rays and write its mesh and weights
@@ -405,9 +454,15 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     sample numbers (a generator that waits for more:
     :class:`povlens.rendering.driver.EarlyRender`), and
     ``plan_for(k)`` the plan to trace sample k with (default ``plan``; plans that
-    differ only in the sample count give the same sample k).  Returns timings: {samples, blocked,
-    rays_and_meshes_s (Python), povray_s (summed over the overlapping processes),
-    wall_s, bands, runs_together, threads, chained}.
+    differ only in the sample count give the same sample k).  ``statistics``: POV-Ray
+    prints its statistics and each run is waited for to exit
+    (:mod:`povlens.pov.render_statistics`); ``own_radiosity``: every sample computes its
+    own radiosity (no shared file, nothing to choose); ``keep_chain``: a chained
+    render's radiosity file is the caller's (kept from an earlier call, left for a
+    later one); ``exiting`` and ``wait_first``: :class:`_SampleRenders`.  Returns timings: {samples, blocked, rays_and_meshes_s (Python),
+    povray_s (summed over the overlapping processes), wall_s, bands, runs_together,
+    threads, chained}, and with ``statistics`` {"statistics": {first sample of a run:
+    (wall s, RenderStatistics)}}.
     """
     outdir = Path(outdir)
     t0 = time.perf_counter()
@@ -417,7 +472,8 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     if stacking is None or bands == 1:
         stacking = StackPlan(bands, 0, 1, False)
     queue = _SampleRenders(plan, outdir, batch, in_flight, on_done, stacking.threads,
-                           stacking.runs == 1, stacking.chained)
+                           stacking.runs == 1, stacking.chained, statistics, own_radiosity,
+                           keep_chain, exiting, wait_first)
     seen: list[int] = []
     try:
         for ks in stack_runs(samples, bands, stacking.together):
@@ -450,12 +506,22 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     finally:
         for k in seen:
             RenderFolder(outdir).sample_mesh(k).unlink(missing_ok=True)
-        if stacking.chained:
+        if stacking.chained and not keep_chain:
             RenderFolder(outdir).radiosity_chain.unlink(missing_ok=True)
-    return {"samples": len(seen), "blocked": blocked, "rays_and_meshes_s": t_mesh,
-            "povray_s": queue.povray_s, "wall_s": time.perf_counter() - t0,
-            "bands": bands, "runs_together": stacking.together, "threads": stacking.threads,
-            "chained": stacking.chained}
+    return _timing(queue, stacking, len(seen), blocked, t_mesh, time.perf_counter() - t0,
+                   statistics)
+
+
+def _timing(queue: _SampleRenders, stacking: StackPlan, samples: int, blocked: int,
+            mesh_s: float, wall_s: float, statistics: bool) -> dict:
+    """:func:`render_samples`'s timing record."""
+    timing = {"samples": samples, "blocked": blocked, "rays_and_meshes_s": mesh_s,
+              "povray_s": queue.povray_s, "wall_s": wall_s, "bands": stacking.bands,
+              "runs_together": stacking.together, "threads": stacking.threads,
+              "chained": stacking.chained}
+    if statistics:
+        timing["statistics"] = dict(queue.run_statistics)
+    return timing
 
 
 def render_batch(outdir: str | os.PathLike, batch: int,

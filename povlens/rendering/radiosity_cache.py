@@ -39,24 +39,20 @@ from __future__ import annotations
 
 import json
 import os
-import re
 from pathlib import Path
 
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
+from povlens.pov.render_statistics import render_statistics
 from povlens.rendering.pinhole_products import pinhole_product
 from povlens.util.files import temporary_path, write_text
 
 __all__ = ["radiosity_cache_for", "radiosity_read_args", "sharing_chosen", "probes_missing",
-           "choice_from", "probe_measurement", "record_probes", "PROBES",
-           "STATISTICS_SWITCHES"]
+           "choice_from", "probe_measurement", "record_probes", "PROBES"]
 
 #: The two measurements the choice compares: a lens sample computing its own radiosity,
 #: and one reading the shared samples.
 PROBES = ("own", "shared")
-#: POV-Ray switches after povlens's quiet ones that print the statistics (to stderr).
-STATISTICS_SWITCHES = ("+GS",)
-_PHASE_S = r"{}:[^(\n]*\(([0-9.]+) seconds\)"
 
 
 def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
@@ -120,13 +116,6 @@ def probes_missing(outdir: str | os.PathLike) -> list[str]:
     return [kind for kind in PROBES if not isinstance(rec.get(kind), dict)]
 
 
-def _phase_seconds(statistics: str, phase: str) -> float:
-    """A phase's time in POV-Ray's statistics ("Radiosity Time: ... (1.392 seconds)");
-    0 when it is not there."""
-    m = re.search(_PHASE_S.format(re.escape(phase)), statistics)
-    return float(m.group(1)) if m else 0.0
-
-
 def choice_from(measurements: dict) -> bool | None:
     """The choice from the probes' measurements: {kind: {"wall_s", "finished", ...}}.
 
@@ -149,13 +138,14 @@ def choice_from(measurements: dict) -> bool | None:
 
 def probe_measurement(sample: int, wall_s: float, statistics: str | None = None) -> dict:
     """A probe's record: its sample, wall time (s) and, once finished (``statistics``:
-    what its POV-Ray printed with :data:`STATISTICS_SWITCHES`), POV-Ray's radiosity and
+    what its POV-Ray printed with
+    :data:`povlens.pov.render_statistics.STATISTICS_SWITCHES`), POV-Ray's radiosity and
     trace times; without statistics it is still running and ``wall_s`` a lower bound."""
     m = {"sample": int(sample), "wall_s": round(float(wall_s), 4),
          "finished": statistics is not None}
     if statistics is not None:
-        m["radiosity_s"] = _phase_seconds(statistics, "Radiosity Time")
-        m["trace_s"] = _phase_seconds(statistics, "Trace Time")
+        stats = render_statistics(statistics)
+        m["radiosity_s"], m["trace_s"] = stats.radiosity_s, stats.trace_s
     return m
 
 

@@ -19,6 +19,8 @@ from povlens.util.images import read_image
 from tests.rendering.test_radiosity_cache import ONE_PER_RUN, RADIOSITY_SCENE, SIZE, _povlens
 
 ROOT = Path(__file__).resolve().parents[2]
+#: Stacks of 8 whatever the lead sample measures (:mod:`povlens.rendering.run_choice`).
+STACKED = {"POVLENS_STACK": "8"}
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
 
 
@@ -85,7 +87,7 @@ def test_a_stacked_run_renders_what_one_run_per_sample_renders(tmp_path):
     args = ("--width", "80", "--height", "60", "--lens", "dgauss.50mm", "--method", "mesh",
             "--samples", "4", "--focus", "1.5", "-q")
     _povlens("render", scene, *args, "-o", tmp_path / "one", env=ONE_PER_RUN)
-    _povlens("render", scene, *args, "-o", tmp_path / "stack")
+    _povlens("render", scene, *args, "-o", tmp_path / "stack", env=STACKED)
     timing = json.loads((tmp_path / "stack" / "samples" / "render.timing.json").read_text())
     assert timing["bands"] >= 4 and timing["runs_together"] and timing["threads"] >= 1
     assert json.loads((tmp_path / "one" / "samples" / "render.timing.json").read_text()
@@ -127,7 +129,7 @@ def test_a_sample_rendered_alone_is_the_same_bits_as_in_its_stack(tmp_path):
     stacked run gave, bit for bit (the layout and the meshes' origin are the plan's)."""
     scene = ROOT / "scenes" / "paper.pov"
     out = tmp_path / "o"
-    _povlens("render", scene, *SIZE, "-o", out)
+    _povlens("render", scene, *SIZE, "-o", out, env=STACKED)
     timing = json.loads((out / "samples" / "render.timing.json").read_text())
     assert timing["bands"] >= 4 and timing["runs_together"]
     first = read_image(out / "samples" / "sample_0002.exr")

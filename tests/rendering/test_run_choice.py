@@ -1,0 +1,94 @@
+"""One POV-Ray run for a stack of lens samples, or one run each, chosen on the first
+sample's measurement (issue 25)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from povlens.pov.render_statistics import RenderStatistics
+from povlens.rendering.run_choice import LOOKUP_S_PER_WORD, RADIOSITY_SHARED, choose_runs
+from povlens.util.images import read_image
+from tests.rendering.test_radiosity_cache import ONE_PER_RUN, RADIOSITY_SCENE, SIZE, _povlens
+
+ROOT = Path(__file__).resolve().parents[2]
+needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
+
+#: What rad_def_test_37.pov's lead sample measured (320x240, tessar.50mm, 2 threads)
+CHEAP = RenderStatistics(parse_s=0.015, radiosity_s=0.001, trace_s=0.105, trace_cpu_s=0.193,
+                         rays=80227, radiosity_rays=3427, final_radiosity_rays=3427)
+#: and cornell.pov's
+HEAVY = RenderStatistics(parse_s=0.017, radiosity_s=0.309, radiosity_cpu_s=0.598,
+                         trace_s=0.548, trace_cpu_s=1.077, rays=397950,
+                         radiosity_rays=320700, final_radiosity_rays=114700)
+
+
+def test_a_cheap_scene_runs_each_sample_and_a_radiosity_heavy_one_stacks():
+    cheap = choose_runs(CHEAP, 0.52, 0.05, 7, 78000, 8 * 4928, 2)
+    heavy = choose_runs(HEAVY, 1.27, 0.05, 7, 78000, 8 * 4928, 2)
+    assert not cheap.stack and heavy.stack
+    assert cheap.cost_s == pytest.approx(
+        7 * 78000 * LOOKUP_S_PER_WORD * 8 * 4928 / 64 / 2 + 7 * 0.05 + (0.52 - CHEAP.phases_s))
+    assert heavy.shared_s == pytest.approx(
+        7 * (0.017 + RADIOSITY_SHARED * HEAVY.radiosity_work_cpu_s) / 2)
+    # a stack costs more as its faces grow; a parse shared pays like radiosity
+    assert choose_runs(HEAVY, 1.27, 0.05, 7, 78000, 200 * 4928, 2).cost_s > heavy.cost_s
+    assert choose_runs(RenderStatistics(parse_s=2.0, trace_s=0.1, trace_cpu_s=0.1), 2.5, 0.05,
+                       7, 78000, 8 * 4928, 2).stack
+    d = heavy.as_dict()
+    assert d["stack"] is True and "rule" in d
+
+
+@needs_povray
+def test_the_lead_sample_chooses_and_hands_on_its_radiosity(tmp_path):
+    """A render whose samples stack: its first renders alone with POV-Ray's statistics,
+    and the choice and measurement go to the timing file; the radiosity file it hands
+    on is gone afterwards; the image is the one of one run per sample within
+    radiosity's noise."""
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    _povlens("render", scene, *SIZE, "-o", tmp_path / "led")
+    timing = json.loads((tmp_path / "led" / "samples" / "render.timing.json").read_text())
+    assert timing["samples"] == 4 and timing["lead"]["samples"] == 1
+    stats = timing["lead"]["statistics"]["0"]
+    assert stats["trace_s"] > 0 and stats["radiosity_rays"] > 0 and stats["wall_s"] > 0
+    choice = timing["choice"]
+    assert choice["stack"] == (choice["shared_s"] > choice["cost_s"])
+    assert timing["runs_together"] == choice["stack"]
+    assert not list((tmp_path / "led").rglob("*.rca"))
+    _povlens("render", scene, *SIZE, "--povray-option", "Radiosity_File_Name=own.rca",
+             "-o", tmp_path / "own", env=ONE_PER_RUN)
+    a = read_image(tmp_path / "own" / "image.exr")[..., :3]
+    b = read_image(tmp_path / "led" / "image.exr")[..., :3]
+    assert a.mean() > 0.05
+    assert abs(b.mean() / a.mean() - 1.0) < 0.03
+    assert np.sqrt(np.mean((a - b) ** 2)) < 0.03 * a.max()
+
+
+@needs_povray
+@pytest.mark.parametrize("runs", ["stack", "own"])
+def test_after_the_lead_both_ways_render_the_samples_of_a_stacked_render(tmp_path, monkeypatch,
+                                                                        runs):
+    """Whichever way the lead chooses, the samples are those a stacked render gives (the
+    same rays, but for float rounding at silhouettes)."""
+    import povlens.rendering.driver as driver
+    from povlens.cli import main
+    from povlens.rendering.run_choice import RunChoice
+    monkeypatch.setattr(driver, "choose_runs", lambda *a: RunChoice(runs == "stack", 0, 0))
+    monkeypatch.delenv("POVLENS_STACK", raising=False)
+    scene = ROOT / "scenes" / "paper.pov"
+    args = ("--width", "80", "--height", "60", "--lens", "dgauss.50mm", "--method", "mesh",
+            "--samples", "4", "--focus", "1.5", "-q")
+    _povlens("render", scene, *args, "-o", tmp_path / "stack", env={"POVLENS_STACK": "8"})
+    assert main(["render", str(scene), *args, "-o", str(tmp_path / "led")]) == 0
+    timing = json.loads((tmp_path / "led" / "samples" / "render.timing.json").read_text())
+    assert timing["runs_together"] == (runs == "stack") and timing["samples"] == 4
+    for k in range(4):
+        a = read_image(tmp_path / "stack" / "samples" / f"sample_{k:04d}.exr")
+        b = read_image(tmp_path / "led" / "samples" / f"sample_{k:04d}.exr")
+        assert a.mean() > 0.05
+        assert np.mean(np.abs(a - b).max(-1) > 2e-3) < 0.005
