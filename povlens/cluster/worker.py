@@ -121,7 +121,7 @@ def _render(job: dict, outdir: Path, ks: list[int], group: bool, stop: threading
     timing = render_samples(plan, lens, table, outdir, 0, ks,
                             in_flight=in_flight if group else 1,
                             on_done=add_ready if group else None, stop=stop,
-                            stacking=stack_plan(plan, ks, cores) if group else None)
+                            stacking=stack_plan(plan, ks, cores, outdir=outdir) if group else None)
     files = {}
     if stop.is_set():
         return files, timing, t_sums, in_flight

@@ -180,6 +180,14 @@ class RenderFolder:
         return self.path / "radiosity.rca"
 
     @property
+    def sample_layout(self) -> Path:
+        """How the folder's lens samples are laid out, when its first sample chose one
+        run each (:mod:`povlens.rendering.run_choice`): ``{"bands": 1, ...}``; every
+        later render of the folder (a resume, ``make``, a cluster worker) lays its
+        samples out so, and they come out the same bits."""
+        return self.samples / "layout.json"
+
+    @property
     def radiosity_chain(self) -> Path:
         """The radiosity samples a render's stacked runs hand on, each reading the
         previous runs' and adding its own (:mod:`povlens.rendering.sample_stacks`);
@@ -427,7 +435,7 @@ class RenderFolder:
             patterns += [every + s for s in (_IMAGE, _BLOCKED, _MESH, _MASK)]
             patterns += [self.exposure_txt.name, self.illumination_json.name,
                          self.radiosity_cache.name, self.radiosity_choice.name,
-                         self.photon_map.name]
+                         self.photon_map.name, f"{_SAMPLES}/{self.sample_layout.name}"]
         out = [f for pattern in patterns for f in self.path.glob(pattern)]
         for k in stale or []:
             out += [self.samples / _sample_name(k, s)
@@ -436,9 +444,10 @@ class RenderFolder:
 
     def worker_inputs(self) -> list[Path]:
         """The folder's files a lens sample's POV-Ray run reads: the plan, the pupil
-        table, the wrappers (the views' and the batches'), and the radiosity samples and
-        the photon map when there are."""
-        cache = [f for f in (self.radiosity_cache, self.photon_map) if f.is_file()]
+        table, the wrappers (the views' and the batches'), and the radiosity samples, the
+        photon map and the samples' layout when there are."""
+        cache = [f for f in (self.radiosity_cache, self.photon_map, self.sample_layout)
+                 if f.is_file()]
         return ([self.plan_json, self.pupil_npz] + sorted(self.path.glob("*.pov"))
                 + sorted(self.samples.glob("*.pov")) + cache)
 

@@ -92,7 +92,7 @@ def _write_mesh(plan: Plan, lens, table, outdir: Path, k: int,
             raise PovlensError("field-mesh samples share one pupil point per sample: "
                                "they take no per-pixel sample points",
                                "convert with --ray-mesh pixel")
-        return _write_stack(plan, lens, table, outdir, [k], stack_bands(plan))[0]
+        return _write_stack(plan, lens, table, outdir, [k], stack_bands(plan, outdir))[0]
     film = plan.film
     placement = placement_of(plan)
     inp = plan.inputs
@@ -468,8 +468,8 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     t0 = time.perf_counter()
     t_mesh = 0.0
     blocked = 0
-    bands = stack_bands(plan) if points is None else 1
-    if stacking is None or bands == 1:
+    bands = stack_bands(plan, outdir) if points is None else 1
+    if stacking is None or stacking.bands != bands:
         stacking = StackPlan(bands, 0, 1, False)
     queue = _SampleRenders(plan, outdir, batch, in_flight, on_done, stacking.threads,
                            stacking.runs == 1, stacking.chained, statistics, own_radiosity,
@@ -549,7 +549,7 @@ def render_batch(outdir: str | os.PathLike, batch: int,
                 exposure_for(outdir, plan, lens, table)
                 timing = render_samples(plan, lens, table, outdir, batch, todo,
                                         in_flight=in_flight,
-                                        stacking=stack_plan(plan, todo, 1))
+                                        stacking=stack_plan(plan, todo, 1, outdir=outdir))
                 write_text(folder.batch_timing(batch), json.dumps(timing) + "\n")
             folder.mark_batch_done(batch, batches[batch])
     return todo

@@ -39,6 +39,7 @@ renders (such a plan renders its passes at the film's size, not interleaved).
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 from pathlib import Path
 
@@ -48,10 +49,12 @@ from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.pov.field_mesh import pass_size
 from povlens.pov.process import pixel_range_args
+from povlens.util.files import write_text
 from povlens.util.images import read_image, write_exr
 
 __all__ = ["StackPlan", "stack_bands", "stack_position", "stack_plan", "stack_runs",
-           "stack_render_height", "stack_row_args", "split_stack", "STACK_FACE_BUDGET",
+           "stack_render_height", "stack_row_args", "split_stack", "recorded_bands",
+           "record_layout", "STACK_FACE_BUDGET",
            "MAX_STACK"]
 
 #: Faces a stack's mesh may hold (every band's passes).
@@ -60,9 +63,10 @@ STACK_FACE_BUDGET = 40000
 MAX_STACK = 32
 
 
-def stack_bands(plan: Plan) -> int:
+def stack_bands(plan: Plan, outdir: str | os.PathLike | None = None) -> int:
     """p: the bands of a stack of the plan's field passes (1: one pass per run).
-    ``POVLENS_STACK`` overrides it (measurements)."""
+    ``POVLENS_STACK`` overrides it (measurements); so does the layout the render
+    folder ``outdir`` records (:meth:`RenderFolder.sample_layout`)."""
     fm = plan.field_mesh
     H = plan.film.height_px
     if fm is None or plan.povray.image_size_read or any(plan.rows_of_sample(k) != (0, H)
@@ -71,8 +75,26 @@ def stack_bands(plan: Plan) -> int:
     forced = os.environ.get("POVLENS_STACK")
     if forced:
         return max(1, min(int(forced), MAX_STACK))
+    recorded = recorded_bands(outdir) if outdir is not None else None
+    if recorded is not None:
+        return recorded
     faces = 2 * int(fm.grid[0]) * int(fm.grid[1]) * int(fm.interleave) ** 2
     return int(max(1, min(MAX_STACK, STACK_FACE_BUDGET // max(faces, 1))))
+
+
+def recorded_bands(outdir: str | os.PathLike) -> int | None:
+    """The bands the folder's layout record gives (None: no record, or unreadable)."""
+    try:
+        bands = json.loads(RenderFolder(outdir).sample_layout.read_text()).get("bands")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return bands if isinstance(bands, int) and 1 <= bands <= MAX_STACK else None
+
+
+def record_layout(outdir: str | os.PathLike, bands: int, why: dict) -> None:
+    """Record that the folder's samples render in stacks of ``bands`` (1: one run
+    each), and ``why`` (the measurement that chose it)."""
+    write_text(RenderFolder(outdir).sample_layout, json.dumps({"bands": int(bands), **why}) + "\n")
 
 
 def stack_position(plan: Plan, k: int, bands: int | None = None) -> tuple[int, int]:
@@ -97,7 +119,7 @@ class StackPlan:
 
 
 def stack_plan(plan: Plan, todo, cores: int, together: bool = True,
-               chain: bool = False) -> StackPlan:
+               chain: bool = False, outdir: str | os.PathLike | None = None) -> StackPlan:
     """How the samples ``todo`` (sample numbers) of ``plan`` render on ``cores`` cores:
     one run per stack they touch; when there are fewer runs than cores, each runs on
     several threads, so that one POV-Ray process shares its radiosity samples over
@@ -105,8 +127,9 @@ def stack_plan(plan: Plan, todo, cores: int, together: bool = True,
     45 % of its radiosity lookups, the first 69 %).  With ``chain`` (a render that
     holds every sample: ``povlens render``) and a plan that shares radiosity, several
     runs follow one another on every core, each reading the radiosity samples of those
-    before it, so that they are shared as in one process."""
-    p = stack_bands(plan)
+    before it, so that they are shared as in one process.  ``outdir``: the render
+    folder, whose layout record counts (:func:`stack_bands`)."""
+    p = stack_bands(plan, outdir)
     todo = list(todo)
     runs = len({k // p for k in todo}) if together else len(todo)
     if p == 1:
