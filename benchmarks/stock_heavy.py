@@ -13,7 +13,8 @@ samples share: several samples per POV-Ray run, the radiosity of one pretrace, o
 photon map) and ``--method mesh`` with each sample its own POV-Ray run computing its
 own radiosity (``POVLENS_STACK=1``, ``--povray-option Radiosity_File_Name=...``, the
 uncached way; photons stay shared: their map gives the per-sample image exactly). It
-reports the ratio mesh / focal_blur, and RMSE and FLIP of the shared render against the
+reports the ratio mesh / focal_blur, how the default render ran its samples (``runs``:
+one stack or one run each, as its first sample chose), and RMSE and FLIP of the shared render against the
 uncached one. One heavy job at a time: run it alone on the machine. Writes
 ``OUT.csv`` and ``OUT.txt``.
 """
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -90,6 +92,7 @@ def measure(scene: Path, uses: str, size, n: int, lens: str, work: Path) -> dict
         row[key] = "" if t is None else round(t, 2)
         if err:
             row["error"] = err
+    row["runs"] = _runs_chosen(work / "mesh_s")
     if row["focal_blur_s"] and row["mesh_s"] and row["mesh_uncached_s"]:
         row["ratio"] = round(row["mesh_s"] / row["focal_blur_s"], 3)
         row["ratio_uncached"] = round(row["mesh_uncached_s"] / row["focal_blur_s"], 3)
@@ -98,6 +101,17 @@ def measure(scene: Path, uses: str, size, n: int, lens: str, work: Path) -> dict
         row["rmse"] = round(compare_arrays(a, b, None)["rmse"], 5)
         row["flip"] = round(flip_error(a, b)[0], 4)
     return row
+
+
+def _runs_chosen(outdir: Path) -> str:
+    """How the default mesh render ran its samples: "stack" or "own" (one run each), as
+    its first sample chose (docs/decisions/planning.md, "One run or a stack,
+    measured"); "" when no choice was made."""
+    try:
+        choice = json.loads((outdir / "samples" / "render.timing.json").read_text()).get("choice")
+    except (OSError, ValueError):
+        return ""
+    return "" if not choice else ("stack" if choice.get("stack") else "own")
 
 
 def main(argv=None) -> int:
@@ -143,7 +157,7 @@ def main(argv=None) -> int:
 
 def _write(rows: list[dict], out: Path) -> None:
     keys = ["scene", "uses", "size", "samples", "own_camera_s", "focal_blur_s", "mesh_s",
-            "mesh_uncached_s", "ratio", "ratio_uncached", "rmse", "flip", "error"]
+            "runs", "mesh_uncached_s", "ratio", "ratio_uncached", "rmse", "flip", "error"]
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out.with_suffix(".csv"), "w", newline="") as f:
         w = csv.DictWriter(f, keys)
@@ -151,11 +165,11 @@ def _write(rows: list[dict], out: Path) -> None:
         for r in rows:
             w.writerow({k: r.get(k, "") for k in keys})
     lines = [f"{'scene':<40} {'uses':<16} {'size':>8} {'N':>3} {'fb s':>7} {'mesh s':>7} "
-             f"{'uncached':>8} {'ratio':>6} {'rmse':>8} {'flip':>6}"]
+             f"{'runs':>5} {'uncached':>8} {'ratio':>6} {'rmse':>8} {'flip':>6}"]
     for r in rows:
         lines.append(f"{r['scene']:<40} {r['uses']:<16} {r['size']:>8} {r['samples']:>3} "
                      f"{r.get('focal_blur_s', ''):>7} {r.get('mesh_s', ''):>7} "
-                     f"{r.get('mesh_uncached_s', ''):>8} {r.get('ratio', ''):>6} "
+                     f"{r.get('runs', ''):>5} {r.get('mesh_uncached_s', ''):>8} {r.get('ratio', ''):>6} "
                      f"{r.get('rmse', ''):>8} {r.get('flip', ''):>6}")
     out.with_suffix(".txt").write_text("\n".join(lines) + "\n")
 

@@ -27,8 +27,8 @@ from povlens.plan.schema import Plan, read_plan
 from povlens.rendering.folder_composite import composite_outdir
 from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, mark_batches_done, render_samples
-from povlens.rendering.run_choice import choose_runs
-from povlens.rendering.sample_stacks import StackPlan, record_layout, recorded_bands, stack_plan
+from povlens.rendering.lead_render import render_led
+from povlens.rendering.sample_stacks import recorded_bands, stack_plan
 from povlens.rendering.views import render_view
 from povlens.util.files import write_text
 
@@ -93,81 +93,16 @@ def _render_locked(outdir: Path, jobs: int | None, quiet: bool,
 def _render_mesh_samples(plan: Plan, lens, table, outdir: Path, todo: list[int], samples,
                          jobs: int, in_flight: int, on_done) -> dict:
     """Render the lens samples ``todo`` of ``povlens render`` (``samples(ks)`` yields
-    them); returns the timing record.  A plan whose samples stack renders the first
-    alone on every core and lets it choose between stacks and one run each for the
-    rest (:mod:`povlens.rendering.run_choice`); its radiosity samples go on to the
-    stacks (:meth:`RenderFolder.radiosity_chain`).  The lead and runs of their own
-    render a pass alone, not in its band of a stack (a band's run writes the stack's
-    full height and POV-Ray's UV bins sort its faces only across: ``raddem.pov`` at
-    640x480 took 3.6 s for 7 samples so, and 1.1 s for the lead, where 8 single passes
-    took 2.9 s); the layout is recorded (:meth:`RenderFolder.sample_layout`), and
-    every later render of the folder lays its samples out so (but the lead of a
-    stacked render: rendered again, it is drawn in its band, the same rays but for
-    float rounding)."""
+    them); returns the timing record.  A plan whose samples stack, and whose folder has
+    not recorded how they run, lets its first sample choose between stacks and one run
+    each (:func:`povlens.rendering.lead_render.render_led`)."""
     stacking = stack_plan(plan, todo, jobs, chain=True, outdir=outdir)
     if (stacking.bands == 1 or len(todo) < 2 or os.environ.get("POVLENS_STACK")
             or recorded_bands(outdir) is not None):
         return render_samples(plan, lens, table, outdir, 0, samples(todo), in_flight=in_flight,
                               on_done=on_done, stacking=stacking)
-    p = stacking.bands
-    radiosity = bool(plan.povray.radiosity_cache)
-    chain = RenderFolder(outdir).radiosity_chain
-    chain.unlink(missing_ok=True)           # an earlier render's
-    exiting: list = []      # the lead's POV-Ray, saving its radiosity samples as it exits
-    try:
-        record_layout(outdir, 1, {"lead_sample": todo[0]})     # the lead: a pass alone
-        lead = render_samples(plan, lens, table, outdir, 0, todo[:1], in_flight=in_flight,
-                              on_done=on_done, stacking=StackPlan(1, 1, jobs, False, radiosity),
-                              statistics=True, keep_chain=True, exiting=exiting)
-        rest = todo[1:]
-        choice = _run_choice(plan, lead, rest, p, jobs)
-        if choice is None or choice.stack:
-            record_layout(outdir, p, {"choice": choice and choice.as_dict(),
-                                      "lead_sample": todo[0]})
-            runs = len({k // p for k in rest})
-            threads = jobs if radiosity else max(1, jobs // runs)
-            stacking = StackPlan(p, runs, threads, True, radiosity)
-        else:   # one pass per run, as every later render of the folder (a resume, make)
-            _stop(exiting)      # the lead's radiosity samples are not read
-            record_layout(outdir, 1, {"choice": choice.as_dict(), "lead_sample": todo[0]})
-            stacking = StackPlan(1, len(rest), 1, False)
-        timing = render_samples(plan, lens, table, outdir, 0, samples(rest), in_flight=in_flight,
-                                on_done=on_done, stacking=stacking, keep_chain=True,
-                                own_radiosity=not stacking.together, wait_first=exiting)
-    finally:
-        _stop(exiting)
-        chain.unlink(missing_ok=True)
-    stats = lead.pop("statistics")
-    lead["statistics"] = {str(k): {"wall_s": round(w, 4), **st.as_dict()}
-                          for k, (w, st) in stats.items()}
-    timing.update(samples=timing["samples"] + lead["samples"],
-                  blocked=timing["blocked"] + lead["blocked"], lead=lead,
-                  choice=None if choice is None else choice.as_dict())
-    return timing
-
-
-def _stop(processes: list) -> None:
-    """Kill the POV-Ray processes left (SIGKILL: what is left of them is their idle
-    shutdown) and empty the list."""
-    while processes:
-        proc = processes.pop()
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait()
-
-
-def _run_choice(plan: Plan, lead: dict, rest: list[int], bands: int, jobs: int):
-    """:func:`~povlens.rendering.run_choice.choose_runs` from the lead's timing (None:
-    its rays were all blocked, nothing was measured)."""
-    if not lead["statistics"] or not rest:
-        return None
-    (wall_s, stats), = lead["statistics"].values()
-    pv, fm = plan.povray, plan.field_mesh
-    pass_pixels = (pv.render_width - pv.drop_right_columns) * (pv.render_height
-                                                               - pv.drop_top_rows)
-    faces = 2 * int(fm.grid[0]) * int(fm.grid[1]) * int(fm.interleave) ** 2
-    return choose_runs(stats, wall_s, lead["rays_and_meshes_s"], len(rest), pass_pixels,
-                       faces * min(bands, len(rest)), jobs)
+    return render_led(plan, lens, table, outdir, todo, samples, stacking.bands, jobs,
+                      in_flight, on_done)
 
 
 class EarlyRender:

@@ -198,7 +198,7 @@ class _SampleRenders:
                  on_done=None, threads: int = 1, one_run: bool = False,
                  chained: bool = False, statistics: bool = False,
                  own_radiosity: bool = False, keep_chain: bool = False,
-                 exiting: list | None = None, wait_first=()):
+                 exiting: list | None = None, wait_first=(), idle: bool = False):
         self.plan, self.folder, self.batch = plan, RenderFolder(outdir), batch
         self.on_done = on_done
         self.samples = self.folder.samples
@@ -216,6 +216,7 @@ class _SampleRenders:
         self.exiting = exiting
         self.early: set[int] = set()
         self.wait_first: list[subprocess.Popen] = list(wait_first)
+        self.idle = idle                # POV-Ray on CPU time nothing else wants
         self.running: dict[int, tuple[subprocess.Popen, Path, float]] = {}
         # first sample of a run -> (its samples, which are drawn, the stack's bands)
         self.stacks: dict[int, tuple[list[int], list[bool], int]] = {}
@@ -320,7 +321,7 @@ class _SampleRenders:
                             f"Declare=PovlensFrame={k}", *rows])
             cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
             with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:
-                proc = start_povray(cmd, self.samples, err)
+                proc = start_povray(cmd, self.samples, err, idle=self.idle)
                 self.running[k] = (proc, tmp, time.perf_counter())   # abort() sees it
         except BaseException:
             if k in self.running:
@@ -412,9 +413,16 @@ class _SampleRenders:
         return (f"lens sample {k} of {pov}" if len(ks) == 1 else
                 f"lens samples {', '.join(map(str, ks))} (one run) of {pov}")
 
-    def finish(self) -> None:
+    def finish(self, stop=None) -> None:
+        """Wait for every run; once ``stop`` (a :class:`threading.Event`) is set, stop
+        those left instead."""
         while self.running:
-            self._reap(block=True)
+            if stop is not None and stop.is_set():
+                self.abort()
+                return
+            self._reap(block=False)
+            if self.running:
+                time.sleep(0.005)
 
     def abort(self) -> None:
         """Stop every running process (an error, an interrupt, a cancelled guess).
@@ -435,7 +443,7 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
                    stop=None, on_done=None, plan_for=None, stacking=None,
                    statistics: bool = False, own_radiosity: bool = False,
                    keep_chain: bool = False, exiting: list | None = None,
-                   wait_first=()) -> dict:
+                   wait_first=(), idle: bool = False) -> dict:
     """Trace, write and render lens samples ``samples`` of batch ``batch``, pipelined.
 
     For each sample in turn: trace its rays and write its mesh and weights
@@ -459,7 +467,8 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     (:mod:`povlens.pov.render_statistics`); ``own_radiosity``: every sample computes its
     own radiosity (no shared file, nothing to choose); ``keep_chain``: a chained
     render's radiosity file is the caller's (kept from an earlier call, left for a
-    later one); ``exiting`` and ``wait_first``: :class:`_SampleRenders`.  Returns timings: {samples, blocked, rays_and_meshes_s (Python),
+    later one); ``exiting`` and ``wait_first``: :class:`_SampleRenders`; ``idle``: the
+    POV-Ray runs take only CPU time nothing else wants.  Returns timings: {samples, blocked, rays_and_meshes_s (Python),
     povray_s (summed over the overlapping processes), wall_s, bands, runs_together,
     threads, chained}, and with ``statistics`` {"statistics": {first sample of a run:
     (wall s, RenderStatistics)}}.
@@ -473,7 +482,7 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
         stacking = StackPlan(bands, 0, 1, False)
     queue = _SampleRenders(plan, outdir, batch, in_flight, on_done, stacking.threads,
                            stacking.runs == 1, stacking.chained, statistics, own_radiosity,
-                           keep_chain, exiting, wait_first)
+                           keep_chain, exiting, wait_first, idle)
     seen: list[int] = []
     try:
         for ks in stack_runs(samples, bands, stacking.together):
@@ -496,10 +505,7 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
                 for _ in range(len(ks) - sum(drawn)):
                     on_done()
             queue._reap(block=False)
-        if stop is not None and stop.is_set():
-            queue.abort()   # stopped while waiting for more samples: do not wait for these
-        else:
-            queue.finish()
+        queue.finish(stop)      # stopped (now or while waiting): the running ones stop
     except BaseException:
         queue.abort()
         raise

@@ -11,9 +11,10 @@ took ``rad_def_test_37.pov`` 2.35 s where a stack took 3.22 s (focal_blur 1.58 s
 ``radiosity/cornell.pov`` 9.67 s where a stack took 8.66 s.
 
 So ``povlens render`` renders its first lens sample (the *lead*) alone, on every core,
-with POV-Ray's statistics (:mod:`povlens.pov.render_statistics`), and handing on its
-radiosity samples to a stack that follows; :func:`choose_runs` then weighs, for the
-samples left, what a stack would share against what it would cost:
+with POV-Ray's statistics (:mod:`povlens.pov.render_statistics`), handing on its
+radiosity samples to a stack that may follow (:mod:`povlens.rendering.lead_render`);
+:func:`choose_runs` then weighs, for the samples left, what a stack would share against
+what it would cost:
 
 * shared: the scene's parse and :data:`RADIOSITY_SHARED` of the lead's radiosity work
   (its pretrace and the radiosity rays of its final trace), for every sample left,

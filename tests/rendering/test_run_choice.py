@@ -75,10 +75,10 @@ def test_after_the_lead_both_ways_render_the_samples_of_a_stacked_render(tmp_pat
                                                                         runs):
     """Whichever way the lead chooses, the samples are those a stacked render gives (the
     same rays, but for float rounding at silhouettes)."""
-    import povlens.rendering.driver as driver
+    import povlens.rendering.lead_render as lead_render
     from povlens.cli import main
     from povlens.rendering.run_choice import RunChoice
-    monkeypatch.setattr(driver, "choose_runs", lambda *a: RunChoice(runs == "stack", 0, 0))
+    monkeypatch.setattr(lead_render, "choose_runs", lambda *a: RunChoice(runs == "stack", 0, 0))
     monkeypatch.delenv("POVLENS_STACK", raising=False)
     scene = ROOT / "scenes" / "paper.pov"
     args = ("--width", "80", "--height", "60", "--lens", "dgauss.50mm", "--method", "mesh",
@@ -92,3 +92,33 @@ def test_after_the_lead_both_ways_render_the_samples_of_a_stacked_render(tmp_pat
         b = read_image(tmp_path / "led" / "samples" / f"sample_{k:04d}.exr")
         assert a.mean() > 0.05
         assert np.mean(np.abs(a - b).max(-1) > 2e-3) < 0.005
+
+
+@needs_povray
+def test_one_run_each_is_recorded_and_a_resume_renders_the_same_bits(tmp_path, monkeypatch):
+    """The lead chose one run each: the folder records one pass per run, and a lost
+    sample rendered again alone is the same bits (its layout is the record's)."""
+    monkeypatch.delenv("POVLENS_STACK", raising=False)
+    scene = ROOT / "scenes" / "paper.pov"
+    args = ("--width", "80", "--height", "60", "--lens", "dgauss.50mm", "--method", "mesh",
+            "--samples", "4", "--focus", "1.5", "-q")
+    out = tmp_path / "o"
+    _povlens("render", scene, *args, "-o", out)
+    timing = json.loads((out / "samples" / "render.timing.json").read_text())
+    assert timing["choice"]["stack"] is False      # no radiosity: nothing a stack shares
+    assert json.loads((out / "samples" / "layout.json").read_text())["bands"] == 1
+    assert timing["bands"] == 1 and not timing["runs_together"]
+    first = read_image(out / "samples" / "sample_0002.exr")
+    for f in (out / "samples").glob("sample_0002.*"):
+        f.unlink()
+    _povlens("render", scene, *args, "-o", out)
+    again = json.loads((out / "samples" / "render.timing.json").read_text())
+    assert again["samples"] == 1 and "choice" not in again
+    assert np.array_equal(read_image(out / "samples" / "sample_0002.exr"), first)
+    # more samples of the same plan keep it (their samples are laid out alike); a new
+    # focus drops every sample, and the record with them
+    _povlens("convert", scene, *args[:-1], "--samples", "8", "-o", out)
+    assert (out / "samples" / "layout.json").exists()
+    refocused = [a if a != "1.5" else "2.5" for a in args[:-1]]
+    _povlens("convert", scene, *refocused, "-o", out)
+    assert not (out / "samples" / "layout.json").exists()
