@@ -25,6 +25,7 @@ from povlens.plan.folder_lock import folder_lock
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, read_plan
 from povlens.rendering.folder_composite import composite_outdir
+from povlens.rendering.field_samples import illumination_map
 from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, mark_batches_done, render_samples
 from povlens.rendering.lead_render import render_led
@@ -78,8 +79,11 @@ def _render_locked(outdir: Path, jobs: int | None, quiet: bool,
         def samples(ks):
             yield from ks
             # every sample is written and its POV-Ray started: the composite's
-            # exposure is computed while they run (not after)
+            # exposure and the lens's relative illumination (its profile, kept in
+            # illumination.json) are computed while they run (not after)
             exposure_for(outdir, plan, lens, table)
+            if plan.inputs.vignetting:
+                illumination_map(outdir, plan, table)
 
         with _progress(len(todo), "lens samples", quiet) as bar:
             timing = _render_mesh_samples(plan, lens, table, outdir, todo, samples, jobs,
