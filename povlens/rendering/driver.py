@@ -98,8 +98,10 @@ def _render_mesh_samples(plan: Plan, lens, table, outdir: Path, todo: list[int],
                          jobs: int, in_flight: int, on_done) -> dict:
     """Render the lens samples ``todo`` of ``povlens render`` (``samples(ks)`` yields
     them); returns the timing record.  A plan whose samples stack and share radiosity,
-    and whose folder has not recorded how they run, lets its first sample choose between
-    stacks and one run each (:func:`povlens.rendering.lead_render.render_led`).  Other
+    in a folder that holds none of them yet (a folder with some, rendered early by
+    ``--method auto``, by ``make`` or before the layout was recorded, keeps the layout
+    they have), lets its first sample choose between stacks and one run each
+    (:func:`povlens.rendering.lead_render.render_led`).  Other
     plans stack: a scene without radiosity has only its parse and start-up to share
     (photon maps are shared either way: :mod:`povlens.rendering.photon_map`), and
     measured on the stock scenes with photons only, the two ways are within 6 % of each
@@ -107,8 +109,9 @@ def _render_mesh_samples(plan: Plan, lens, table, outdir: Path, todo: list[int],
     optics 1.25 against 1.32, phot_met_glass 1.77 against 1.62); their images then
     stay the same bits whichever way a folder renders (``make``, a cluster)."""
     stacking = stack_plan(plan, todo, jobs, chain=True, outdir=outdir)
-    if (stacking.bands == 1 or len(todo) < 2 or not plan.povray.radiosity_cache
-            or os.environ.get("POVLENS_STACK") or recorded_bands(outdir) is not None):
+    if (stacking.bands == 1 or len(todo) < plan.inputs.samples or len(todo) < 2
+            or not plan.povray.radiosity_cache or os.environ.get("POVLENS_STACK")
+            or recorded_bands(outdir) is not None):
         return render_samples(plan, lens, table, outdir, 0, samples(todo), in_flight=in_flight,
                               on_done=on_done, stacking=stacking)
     return render_led(plan, lens, table, outdir, todo, samples, stacking.bands, jobs,

@@ -131,3 +131,21 @@ def test_a_scene_without_radiosity_stacks_without_a_lead(tmp_path, monkeypatch):
     timing = json.loads((tmp_path / "o" / "samples" / "render.timing.json").read_text())
     assert timing["runs_together"] and "lead" not in timing
     assert not (tmp_path / "o" / "samples" / "layout.json").exists()
+
+
+@needs_povray
+def test_a_folder_holding_samples_keeps_their_layout_without_a_lead(tmp_path, monkeypatch):
+    """Samples rendered before (here stacked, no record) keep the layout: the samples
+    left stack with them, no lead."""
+    monkeypatch.delenv("POVLENS_STACK", raising=False)
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    out = tmp_path / "o"
+    _povlens("render", scene, *SIZE, "-o", out, env={"POVLENS_STACK": "8"})
+    for k in (2, 3):
+        for f in (out / "samples").glob(f"sample_{k:04d}.*"):
+            f.unlink()
+    _povlens("render", scene, *SIZE, "-o", out)
+    timing = json.loads((out / "samples" / "render.timing.json").read_text())
+    assert timing["samples"] == 2 and "lead" not in timing and timing["runs_together"]
+    assert not (out / "samples" / "layout.json").exists()
