@@ -34,7 +34,7 @@ from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.rendering.mesh_samples import render_samples
 from povlens.rendering.run_choice import choose_runs
-from povlens.rendering.sample_stacks import StackPlan, record_layout
+from povlens.rendering.sample_stacks import StackPlan, pass_faces, record_layout
 
 __all__ = ["render_led"]
 
@@ -162,9 +162,8 @@ def _run_choice(plan: Plan, lead: dict, rest: int, bands: int, jobs: int):
     if not lead["statistics"] or not rest:
         return None
     (wall_s, stats), = lead["statistics"].values()
-    pv, fm = plan.povray, plan.field_mesh
+    pv = plan.povray
     pass_pixels = (pv.render_width - pv.drop_right_columns) * (pv.render_height
                                                                - pv.drop_top_rows)
-    faces = 2 * int(fm.grid[0]) * int(fm.grid[1]) * int(fm.interleave) ** 2
     return choose_runs(stats, wall_s, lead["rays_and_meshes_s"], rest, pass_pixels,
-                       faces * min(bands, rest), jobs)
+                       pass_faces(plan) * min(bands, rest), jobs)

@@ -53,7 +53,7 @@ from povlens.util.files import write_text
 from povlens.util.images import read_image, write_exr
 
 __all__ = ["StackPlan", "stack_bands", "stack_position", "stack_plan", "stack_runs",
-           "stack_render_height", "stack_row_args", "split_stack", "recorded_bands",
+           "stack_render_height", "stack_row_args", "split_stack", "pass_faces", "recorded_bands",
            "record_layout", "STACK_FACE_BUDGET",
            "MAX_STACK"]
 
@@ -78,8 +78,13 @@ def stack_bands(plan: Plan, outdir: str | os.PathLike | None = None) -> int:
     recorded = recorded_bands(outdir) if outdir is not None else None
     if recorded is not None:
         return recorded
-    faces = 2 * int(fm.grid[0]) * int(fm.grid[1]) * int(fm.interleave) ** 2
-    return int(max(1, min(MAX_STACK, STACK_FACE_BUDGET // max(faces, 1))))
+    return int(max(1, min(MAX_STACK, STACK_FACE_BUDGET // max(pass_faces(plan), 1))))
+
+
+def pass_faces(plan: Plan) -> int:
+    """Faces of one field pass's mesh: two a grid cell, in each of its interleaved tiles."""
+    fm = plan.field_mesh
+    return 2 * int(fm.grid[0]) * int(fm.grid[1]) * int(fm.interleave) ** 2
 
 
 def recorded_bands(outdir: str | os.PathLike) -> int | None:
