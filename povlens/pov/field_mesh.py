@@ -482,8 +482,7 @@ def _fit_normals(pts: MeshPoints, rays, model, grid, normal0, S, pixel_angle_rad
     face, B = locate_in_grid(grid, model.uv_rect(), pts.fit_uv[use, 0], pts.fit_uv[use, 1])
     t = rays.direction[use] * S
     t /= np.linalg.norm(t, axis=1, keepdims=True)
-    At, lu, lam = _fit_solver(tuple(grid), use, face, B, pts.faces, len(normal0))
-    n = lu.solve(np.asarray(At @ t + lam * normal0))
+    n = _fit_solver(tuple(grid), use, face, B, pts.faces, len(normal0)).solve(t, normal0)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     # what POV-Ray traces at the fit's samples: normalize(sum B n) mapped back by S^-1
     ok = rays.passed[use]
@@ -497,24 +496,59 @@ def _fit_normals(pts: MeshPoints, rays, model, grid, normal0, S, pixel_angle_rad
 
 
 _FIT_SOLVERS: dict = {}
+#: The ridge weight of the fit: vertices no fit sample touches keep their own ray.
+FIT_RIDGE = 1e-6
+#: Fits of at most this many vertices are solved densely (numpy's Cholesky): a render
+#: of up to 640x480 then never imports scipy.sparse (0.13 s of a 2.4 s render, most of
+#: what the mesh path adds to POV-Ray's own start-up); larger grids factorise sparsely.
+DENSE_FIT_VERTICES = 600
 
 
-def _fit_solver(grid, use: np.ndarray, face, B, faces, n_v: int):
-    """(A^T, the factorised A^T A + lam I, lam) of the fit: the same for every tile whose
-    fit samples exist at the same places (kept for the last few grids)."""
+class _FitSystem:
+    """The normal equations (A^T A + lam I) n = A^T t + lam n0 of the fit, factorised
+    once: ``A`` (samples x vertices) holds each fit sample's barycentric weights ``B``
+    at its face's three vertices ``tri``."""
+
+    def __init__(self, tri: np.ndarray, B: np.ndarray, n_v: int):
+        self.tri, self.B, self.n_v = tri, B, n_v
+        if n_v <= DENSE_FIT_VERTICES:
+            # A^T A summed from each sample's 3 x 3 outer product; L^-1 of its Cholesky
+            # factor (condition sqrt of the system's) makes each solve two products
+            flat = (tri[:, :, None] * n_v + tri[:, None, :]).ravel()
+            w = (B[:, :, None] * B[:, None, :]).ravel()
+            M = np.bincount(flat, w, minlength=n_v * n_v).reshape(n_v, n_v)
+            M[np.diag_indices(n_v)] += FIT_RIDGE
+            self.l_inv = np.linalg.inv(np.linalg.cholesky(M))
+            self.lu = None
+        else:
+            import scipy.sparse as sp
+            import scipy.sparse.linalg as spl
+            A = sp.csr_matrix((B.ravel(), (np.repeat(np.arange(len(B)), 3), tri.ravel())),
+                              shape=(len(B), n_v))
+            At = A.T.tocsr()
+            self.lu = spl.splu((At @ A + FIT_RIDGE * sp.identity(n_v)).tocsc())
+
+    def solve(self, t: np.ndarray, normal0: np.ndarray) -> np.ndarray:
+        """(V, 3) vertex normals (unnormalised) fitting the targets ``t`` (S, 3)."""
+        rhs = FIT_RIDGE * np.asarray(normal0, dtype=np.float64)
+        for k in range(3):          # A^T t, vertex slot by slot
+            for c in range(3):
+                rhs[:, c] += np.bincount(self.tri[:, k], self.B[:, k] * t[:, c],
+                                         minlength=self.n_v)
+        if self.lu is not None:
+            return self.lu.solve(rhs)
+        return self.l_inv.T @ (self.l_inv @ rhs)
+
+
+def _fit_solver(grid, use: np.ndarray, face, B, faces, n_v: int) -> _FitSystem:
+    """The fit's factorised system: the same for every tile whose fit samples exist at
+    the same places (kept for the last few grids)."""
     import hashlib
     key = (grid, n_v, hashlib.sha1(np.packbits(use).tobytes()).hexdigest())
     if key not in _FIT_SOLVERS:
-        import scipy.sparse as sp
-        import scipy.sparse.linalg as spl
-        n_s = len(face)
-        A = sp.csr_matrix((B.ravel(), (np.repeat(np.arange(n_s), 3), faces[face].ravel())),
-                          shape=(n_s, n_v))
-        lam = 1e-6
-        At = A.T.tocsr()
         if len(_FIT_SOLVERS) >= 8:
             _FIT_SOLVERS.pop(next(iter(_FIT_SOLVERS)))
-        _FIT_SOLVERS[key] = (At, spl.splu((At @ A + lam * sp.identity(n_v)).tocsc()), lam)
+        _FIT_SOLVERS[key] = _FitSystem(faces[face], B, n_v)
     return _FIT_SOLVERS[key]
 
 

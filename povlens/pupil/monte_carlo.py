@@ -37,6 +37,7 @@ infinity.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -67,13 +68,22 @@ def sobol_points(n: int, d: int = 2, *, seed: int = 0) -> np.ndarray:
         return np.zeros((0, d))
     m = max(0, math.ceil(math.log2(n)))
     if isinstance(seed, (int, np.integer)) and m <= CACHED_SOBOL_LOG2:
-        name = f"sobol-d{d}-seed{int(seed)}-m{m}-scipy{_scipy_version()}.npy"
-        block = cached_array(name, lambda: _sobol_block(d, m, seed),
-                             lambda a: a.shape == (2 ** m, d) and a.dtype == np.float64
-                             and bool(np.all((a >= 0.0) & (a < 1.0))))
+        block = _cached_sobol_block(d, m, int(seed))
     else:
         block = _sobol_block(d, m, seed)
     return np.minimum(block[:n], np.nextafter(1.0, 0.0))
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_sobol_block(d: int, m: int, seed: int) -> np.ndarray:
+    """:func:`_sobol_block` from the user's cache, kept in memory too: a render asks for
+    the same block for every lens sample (read-only: callers get copies)."""
+    name = f"sobol-d{d}-seed{seed}-m{m}-scipy{_scipy_version()}.npy"
+    block = cached_array(name, lambda: _sobol_block(d, m, seed),
+                         lambda a: a.shape == (2 ** m, d) and a.dtype == np.float64
+                         and bool(np.all((a >= 0.0) & (a < 1.0))))
+    block.setflags(write=False)
+    return block
 
 
 #: Sobol' blocks up to 2**this points are kept in the user's cache
@@ -82,6 +92,7 @@ def sobol_points(n: int, d: int = 2, *, seed: int = 0) -> np.ndarray:
 CACHED_SOBOL_LOG2 = 16
 
 
+@functools.lru_cache(maxsize=1)
 def _scipy_version() -> str:
     from importlib.metadata import version      # without importing scipy.stats
     return version("scipy")

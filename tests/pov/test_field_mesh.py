@@ -100,6 +100,26 @@ def test_certified_grid_holds_at_every_pixel_for_other_samples(lens):
     assert ray_error_px(coarse, model, field, s.placement, s.pixel_angle)["direction_px"] > 2 * worst
 
 
+def test_dense_fit_equals_the_sparse_factorisation(monkeypatch):
+    """Small fits are solved densely (no scipy.sparse import): the same normals as
+    the sparse factorisation larger grids use, to rounding."""
+    from povlens.pov import field_mesh
+    s = setup_for("dgauss.50mm", 640, 480)
+    fm = s.plan.field_mesh
+    model = uv_model(640, 480, (0.3, 0.8))
+    field = s.field(s.pupil((0.8, 0.3)))
+    assert (fm.grid[0] + 1) * (fm.grid[1] + 1) <= field_mesh.DENSE_FIT_VERTICES
+    field_mesh._FIT_SOLVERS.clear()
+    dense = build_field_mesh(field, s.placement, model, fm.grid, fm.eps, s.pixel_angle)
+    field_mesh._FIT_SOLVERS.clear()
+    monkeypatch.setattr(field_mesh, "DENSE_FIT_VERTICES", 0)
+    sparse = build_field_mesh(field, s.placement, model, fm.grid, fm.eps, s.pixel_angle)
+    field_mesh._FIT_SOLVERS.clear()
+    assert dense.normal.shape == sparse.normal.shape
+    assert np.abs(dense.normal - sparse.normal).max() < 1e-12
+    assert np.array_equal(dense.vertex, sparse.vertex)
+
+
 @pytest.mark.parametrize("lens", ["dgauss.50mm", "wide.22mm", "fisheye.10mm"])
 def test_pass_mask_equals_a_full_trace(lens):
     s = setup_for(lens, 640, 480)
