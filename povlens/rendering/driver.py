@@ -29,6 +29,7 @@ from povlens.rendering.field_samples import illumination_map
 from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, mark_batches_done, render_samples
 from povlens.rendering.lead_render import render_led
+from povlens.rendering.running_sums import RunningSums
 from povlens.rendering.sample_stacks import recorded_bands, stack_plan
 from povlens.rendering.views import render_view
 from povlens.util.files import write_text
@@ -85,12 +86,21 @@ def _render_locked(outdir: Path, jobs: int | None, quiet: bool,
             if plan.inputs.vignetting:
                 illumination_map(outdir, plan, table)
 
-        with _progress(len(todo), "lens samples", quiet) as bar:
-            timing = _render_mesh_samples(plan, lens, table, outdir, todo, samples, jobs,
-                                          in_flight, lambda: bar.update(1))
+        running = None if folder.group_files() else RunningSums(outdir, plan, table)
+        try:
+            with _progress(len(todo), "lens samples", quiet) as bar:
+                timing = _render_mesh_samples(plan, lens, table, outdir, todo, samples, jobs,
+                                              in_flight, lambda: bar.update(1))
+        except BaseException:
+            if running is not None:
+                running.stop()
+            raise
         write_text(folder.timing("render"), json.dumps(timing) + "\n")
+        sums = None if running is None else running.result()
+    else:
+        sums = None
     mark_batches_done(outdir, plan)
-    composite_outdir(outdir)
+    composite_outdir(outdir, sums=sums)
     return folder.image_exr
 
 

@@ -19,15 +19,26 @@ def _scipy(n, d, seed):
 
 def test_cached_sobol_points_are_scipys(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    fresh = monte_carlo._cached_sobol_block.cache_clear     # as a new process would start
+    fresh()
     first = sobol_points(300, 3, seed=7)                    # made and stored
     (entry,) = cache_folder().glob("sobol-d3-seed7-m9-*.npy")
+    entry.unlink()
+    assert np.array_equal(sobol_points(300, 3, seed=7), first)  # kept in memory
+    assert not entry.exists()
+    fresh()
+    first = sobol_points(300, 3, seed=7)                    # made and stored again
+    fresh()
     again = sobol_points(300, 3, seed=7)                    # read back
     assert np.array_equal(first, _scipy(300, 3, 7)) and np.array_equal(again, first)
     np.save(entry, np.full((512, 3), 2.0))                  # damaged: out of range
+    fresh()
     assert np.array_equal(sobol_points(300, 3, seed=7), first)
     entry.write_bytes(b"not an array")
+    fresh()
     assert np.array_equal(sobol_points(300, 3, seed=7), first)
     assert np.load(entry).shape == (512, 3)                  # written again
+    fresh()
 
 
 def test_an_unwritable_cache_folder_is_harmless(tmp_path, monkeypatch):
