@@ -35,6 +35,7 @@ so the grid needed grows with the square root of the image width.
 from __future__ import annotations
 
 import dataclasses
+import threading
 
 import numpy as np
 
@@ -496,6 +497,7 @@ def _fit_normals(pts: MeshPoints, rays, model, grid, normal0, S, pixel_angle_rad
 
 
 _FIT_SOLVERS: dict = {}
+_FIT_SOLVERS_LOCK = threading.Lock()
 #: The ridge weight of the fit: vertices no fit sample touches keep their own ray.
 FIT_RIDGE = 1e-6
 #: Fits of at most this many vertices are solved densely (numpy's Cholesky): a render
@@ -545,11 +547,12 @@ def _fit_solver(grid, use: np.ndarray, face, B, faces, n_v: int) -> _FitSystem:
     the same places (kept for the last few grids)."""
     import hashlib
     key = (grid, n_v, hashlib.sha1(np.packbits(use).tobytes()).hexdigest())
-    if key not in _FIT_SOLVERS:
-        if len(_FIT_SOLVERS) >= 8:
-            _FIT_SOLVERS.pop(next(iter(_FIT_SOLVERS)))
-        _FIT_SOLVERS[key] = _FitSystem(faces[face], B, n_v)
-    return _FIT_SOLVERS[key]
+    with _FIT_SOLVERS_LOCK:     # the lead's and its companions' threads build meshes at once
+        if key not in _FIT_SOLVERS:
+            if len(_FIT_SOLVERS) >= 8:
+                _FIT_SOLVERS.pop(next(iter(_FIT_SOLVERS)))
+            _FIT_SOLVERS[key] = _FitSystem(faces[face], B, n_v)
+        return _FIT_SOLVERS[key]
 
 
 def _rows(a: np.ndarray, fmt: str) -> str:

@@ -337,3 +337,40 @@ def test_rays_from_one_point_are_refused_not_dropped():
 
     with pytest.raises(PovlensError, match="degenerate faces"):
         build_field_mesh(from_one_point, _camera(d, r, u), uv_model(W, H), (4, 3), 0.01, 1e-3)
+
+
+def test_fit_systems_are_shared_safely_between_threads(monkeypatch):
+    """The lead sample's thread and its companions' build meshes at once: the cache of
+    factorised fits, evicting as it fills, must not break under them (without its lock
+    this raised "dictionary changed size during iteration" in 2-4 of 8 threads)."""
+    import sys
+    import threading
+    from povlens.pov import field_mesh
+    n_v, n_s = 12, 30
+    rng = np.random.default_rng(0)
+    faces = rng.integers(0, n_v, (20, 3))
+    face = rng.integers(0, 20, n_s)
+    B = rng.random((n_s, 3))
+    B /= B.sum(1, keepdims=True)
+    errors = []
+
+    def build(seed):
+        r = np.random.default_rng(seed)
+        try:
+            for _ in range(300):
+                use = r.random(64) < 0.5        # a new cache key nearly every time
+                assert field_mesh._fit_solver((3, 2), use, face, B, faces, n_v).n_v == n_v
+        except Exception as e:                  # noqa: BLE001 - reported below
+            errors.append(repr(e))
+    monkeypatch.setattr(field_mesh, "_FIT_SOLVERS", {})
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)                 # threads switch as often as they can
+    try:
+        threads = [threading.Thread(target=build, args=(i,)) for i in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert errors == []
