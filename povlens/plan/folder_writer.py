@@ -28,7 +28,8 @@ from pathlib import Path
 from povlens.errors import PovlensError
 from povlens.plan.render_folder import VIEWS, RenderFolder
 from povlens.plan.schema import FocalBlurSettings, Plan, read_plan, write_plan
-from povlens.pov.mesh import SINK_RADIUS, focal_blur_wrapper, photon_map_block, pinhole_wrapper
+from povlens.pov.mesh import (SINK_RADIUS, focal_blur_wrapper, photon_map_block, pinhole_wrapper,
+                              pretrace_block)
 from povlens.pov.povray_paths import include_text
 from povlens.pov.sdl import pov_string, pov_vector, read_template
 from povlens.util.files import write_text
@@ -93,8 +94,12 @@ def _batch_wrapper(plan: Plan, outdir: Path) -> str:
     photons = photon_map_block(plan.povray.photon_settings, "load_file", ph["load"],
                                ph["load_flag"])
     if plan.field_mesh is not None:
+        film = plan.film
+        pretrace = pretrace_block(plan.povray.radiosity_pretrace,
+                                  (film.width_px, film.height_px), plan.field_mesh.interleave)
         return read_template("field_batch.pov.tmpl").substitute(
-            names, scene_include=pov_string(scene), photons=photons)
+            names, scene_include=pov_string(scene), photons=photons,
+            pretrace=pretrace or "// (the scene's own radiosity pretrace, if any, is kept)")
     return read_template("mesh_batch.pov.tmpl").substitute(
         names, scene_include=pov_string(scene), sink_centre=pov_vector(plan.sink_centre),
         sink_radius=f"{SINK_RADIUS:.9g}", photons=photons)

@@ -100,17 +100,37 @@ def _field_mesh(opts: ConvertOptions, plan: Plan, st: PlanStart, placement, tabl
         plan.inputs = dataclasses.replace(plan.inputs, ray_mesh="pixel")
         plan.add_note(why_not)
         return
-    sized = bool(st.scene_size_uses)
-    if sized:   # the passes must render at the film's size (+ FS#261's row and column)
-        plan.field_mesh = dataclasses.replace(plan.field_mesh, interleave=1)
+    radiosity = "radiosity" in st.scene_settings
+    at_film_size = (f"lens samples render one pass per run at {film.width_px + 1}x"
+                    f"{film.height_px + 1} (POV-Ray 3.7's extra row and column), not "
+                    f"interleaved or stacked")
+    sized = bool(st.scene_size_uses) or (radiosity and st.scene_pretrace is None)
+    if st.scene_size_uses:   # the passes render at the film's size (+ FS#261's row, column)
         plan.add_note(f"the scene reads image_width/image_height ({st.scene_size_uses[0]}) "
-                      f"outside its camera, which POV-Ray sets to the size it renders: lens "
-                      f"samples render one pass per run at {film.width_px + 1}x"
-                      f"{film.height_px + 1} (POV-Ray 3.7's extra row and column), not "
-                      f"interleaved or stacked")
+                      f"outside its camera, which POV-Ray sets to the size it renders: "
+                      f"{at_film_size}")
+    elif sized:
+        plan.add_note(f"radiosity: povlens cannot tell the scene's pretrace_start and "
+                      f"pretrace_end, which POV-Ray spaces by the size it renders: "
+                      f"{at_film_size}")
+    if sized:
+        plan.field_mesh = dataclasses.replace(plan.field_mesh, interleave=1)
     from povlens.pov.field_mesh import pass_size
     wr, hr = pass_size(film.width_px, film.height_px, plan.field_mesh.interleave)
-    plan.povray = PovraySettings(plan.povray.version, wr, hr, 1, 1, image_size_read=sized)
+    pretrace = st.scene_pretrace if radiosity and not sized else None
+    plan.povray = PovraySettings(plan.povray.version, wr, hr, 1, 1, image_size_read=sized,
+                                 radiosity_pretrace=pretrace)
+    if pretrace is not None:
+        plan.add_note(PRETRACE_NOTE.format(start=pretrace[0], end=pretrace[1]))
+
+
+#: What a field-mesh plan of a scene with radiosity says it adds.
+PRETRACE_NOTE = (
+    "radiosity: a lens sample's run renders the frame as interleaved tiles side by side "
+    "(and stacks of them), larger than the frame, and POV-Ray spaces its radiosity pretrace "
+    "by the size it renders; so each run repeats the scene's pretrace_start {start:g} and "
+    "pretrace_end {end:g} scaled to its size (a global_settings radiosity block after the "
+    "scene), spacing the pretrace on the scene as on the frame")
 
 
 def _antialias_note(opts: ConvertOptions, st: PlanStart) -> str | None:

@@ -87,6 +87,7 @@ class PlanStart:
     scene_photons: str | None = None       # its photons block's items (SceneCamera)
     scene_writes: tuple[str, ...] = ()     # where it opens files to write (SceneCamera)
     scene_size_uses: tuple[str, ...] = ()  # where it reads image_width/height (SceneCamera)
+    scene_pretrace: tuple[float, float] | None = None  # its radiosity pretrace (SceneCamera)
     anamorphic: dict | None = None         # Plan.anamorphic (povlens.plan.anamorphic)
 
 
@@ -142,7 +143,8 @@ def start_plan(opts: ConvertOptions) -> PlanStart:
                      () if cam is None else tuple(cam.global_settings),
                      None if cam is None else cam.photon_settings,
                      () if cam is None else tuple(cam.written_files),
-                     () if cam is None else tuple(cam.image_size_uses))
+                     () if cam is None else tuple(cam.image_size_uses),
+                     None if cam is None else cam.radiosity_pretrace)
     if ana is not None:
         start.anamorphic = anamorphic_record(ana, model, film, opts.film.desqueeze)
     return start

@@ -271,13 +271,23 @@ class PovraySettings:
     #: photon map shot with them (``RenderFolder.photon_map``;
     #: :mod:`povlens.rendering.photon_map`).
     photon_settings: str = ""
-    #: The scene reads ``image_width`` / ``image_height`` outside its camera: lens
-    #: samples render one pass per run at the film's size (no interleave, no stack;
-    #: :mod:`povlens.rendering.sample_stacks`).
+    #: Lens samples render one pass per run at the film's size (no interleave, no
+    #: stack; :mod:`povlens.rendering.sample_stacks`): the scene reads ``image_width``
+    #: / ``image_height`` outside its camera, or povlens cannot tell its radiosity
+    #: pretrace (the key's name is its first reason).
     image_size_read: bool = False
+    #: The scene's radiosity (pretrace_start, pretrace_end), fractions of the frame's
+    #: larger side: a field pass laid out larger than the frame repeats them scaled to
+    #: its size, so its pretrace is spaced on the scene as the frame's would be
+    #: (:func:`povlens.pov.mesh.pretrace_block`); None: the scene's are kept as read.
+    radiosity_pretrace: tuple[float, float] | None = None
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
+        if self.radiosity_pretrace is None:  # nor those before the scaled pretrace
+            del d["radiosity_pretrace"]
+        else:
+            d["radiosity_pretrace"] = [float(v) for v in self.radiosity_pretrace]
         if not self.image_size_read:        # nor those before stacked samples
             del d["image_size_read"]
         if not self.drop_right_columns:     # plans before field meshes had none
@@ -287,6 +297,12 @@ class PovraySettings:
         if not self.photon_settings:        # nor those before the shared photon map
             del d["photon_settings"]
         return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PovraySettings":
+        pretrace = d.get("radiosity_pretrace")
+        return _fields_of(cls, d, radiosity_pretrace=None if pretrace is None
+                          else (float(pretrace[0]), float(pretrace[1])))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -565,7 +581,7 @@ class Plan:
                                          tl.get("pupil_diameter_x_mm")),
             povray_camera=PovrayCamera.from_dict(d["povray_camera"]),
             model_error=ModelError.from_dict(d["model_error"]) if d["model_error"] else None,
-            povray=_fields_of(PovraySettings, d["povray"]),
+            povray=PovraySettings.from_dict(d["povray"]),
             sink_centre=_vector(d["sink_centre"]),
             batches=[[int(k) for k in b] for b in d["batches"]],
             sample_rows=None if rows is None else [(int(r[0]), int(r[1])) for r in rows],

@@ -126,6 +126,9 @@ class SceneCamera:
     photon_settings : the items of the scene's last ``photons`` block in
         ``global_settings`` as SDL text a later block can repeat (names replaced by
         their values); "" when povlens cannot repeat it whole; None without one.
+    radiosity_pretrace : (pretrace_start, pretrace_end) the scene's radiosity leaves
+        POV-Ray with (:attr:`SceneReader.radiosity_pretrace`); None without radiosity
+        or when povlens cannot tell.
     written_files : ``"file:line"`` of each ``#fopen`` that writes or appends a file
         while the scene is parsed.
     image_size_uses : ``"file:line"`` of each ``image_width`` / ``image_height`` the
@@ -150,6 +153,7 @@ class SceneCamera:
     replaced: list[str] = dataclasses.field(default_factory=list)
     global_settings: tuple[str, ...] = ()
     photon_settings: str | None = None
+    radiosity_pretrace: tuple[float, float] | None = None
     written_files: tuple[str, ...] = ()
     image_size_uses: tuple[str, ...] = ()
 
@@ -218,6 +222,7 @@ def parse_scene_camera(
                                 replaced=extra + _notes(cam, image_width, image_height),
                                 global_settings=notes.get("global_settings", ()),
                                 photon_settings=notes.get("photon_settings"),
+                                radiosity_pretrace=notes.get("radiosity_pretrace"),
                                 written_files=notes.get("written_files", ()),
                                 image_size_uses=notes.get("image_size_uses", ()))
     if files is not None:
@@ -313,6 +318,7 @@ def _read_camera(path: Path, image_width, image_height, libs, clock, declares
                    "files": None if reader.unread_includes else list(reader.included),
                    "global_settings": tuple(sorted(reader.global_settings)),
                    "photon_settings": reader.photon_settings,
+                   "radiosity_pretrace": reader.radiosity_pretrace,
                    "written_files": tuple(reader.written_files),
                    "image_size_uses": image_size_uses(reader.included)}
     if cam is None:
