@@ -64,6 +64,7 @@ __all__ = [
     "pinhole_wrapper",
     "photon_map_block",
     "pretrace_block",
+    "RADIOSITY_READ_FLAG",
 ]
 
 #: Radius of the black sink sphere (scene units).  Generous compared with the
@@ -420,24 +421,31 @@ def mesh_wrapper(
     )
 
 
+#: Declared (``Declare=NAME=1``) for a field pass's run that reads radiosity samples
+#: (``+RFI``): it keeps the scene's pretrace (:func:`pretrace_block`).
+RADIOSITY_READ_FLAG = "PovlensRadiosityRead"
+
+
 def pretrace_block(pretrace: tuple[float, float] | None, frame_size: tuple[int, int],
                    stride: int) -> str:
     """SDL that repeats a scene's radiosity pretrace scaled to the size a field pass's run
-    renders ("" when ``pretrace`` is None).
+    renders ("" when ``pretrace`` is None), unless the run reads radiosity samples.
 
     POV-Ray 3.7 spaces the pretrace by the larger side of the image it renders
-    (``pretrace_start`` x max(+W, +H) pixels, down to ``pretrace_end``'s), and a field
-    pass's run renders m x m tiles of 1/m the frame's scale side by side (and stacks of
-    passes under one another: :func:`povlens.pov.field_mesh.pass_size`).  Unscaled, its
-    pretrace is m x max(W', H') / max(W, H) times coarser on the scene than the frame's
-    (16 times for m = 4): it leaves the cache sparse, and the final trace fills it tile by
-    tile, the first tile rendered before the rest have samples to share -- a dot lattice
-    of period m on ``raddem.pov`` stopped down (docs/decisions/planning.md, "A pattern in
-    runs of their own").  Scaled by max(W, H) / (m max(+W, +H)), read from
-    ``image_width`` and ``image_height`` as the run is parsed, the spacing on the scene is
-    the author's.  A run the frame's size (+1, POV-Ray's extra row and column) keeps the
-    scene's own.  A later ``radiosity`` block changes only the items it sets (measured:
-    ``count`` kept).
+    (``pretrace_start`` x max(+W, +H) pixels, down to ``pretrace_end``'s, at least 1), and
+    a field pass's run renders m x m tiles of 1/m the frame's scale side by side (and
+    stacks of passes under one another: :func:`povlens.pov.field_mesh.pass_size`).
+    Unscaled, its pretrace is m x max(W', H') / max(W, H) times coarser on the scene than
+    the frame's (16 times for m = 4): a run computing its own radiosity then fills the
+    cache in the final trace tile by tile, the first tile before the rest have samples
+    to share -- a dot lattice of period m on ``raddem.pov`` stopped down
+    (docs/decisions/planning.md, "A pattern in runs of their own").  Scaled by
+    max(W, H) / (m max(+W, +H)), read from ``image_width`` and ``image_height`` as the
+    run is parsed, every tile's pretrace is the author's on the scene.  That traces m^2
+    times the frame's pretrace pixels, so a run that reads radiosity samples made
+    before it (declaring :data:`RADIOSITY_READ_FLAG`; they are complete) keeps the
+    scene's own, as does a run the frame's size (+1, POV-Ray's extra row and column).
+    A later ``radiosity`` block changes only the items it sets (measured: ``count`` kept).
 
     Parameters
     ----------
@@ -451,8 +459,10 @@ def pretrace_block(pretrace: tuple[float, float] | None, frame_size: tuple[int, 
     side, m = max(int(frame_size[0]), int(frame_size[1])), int(stride)
     return (f"#declare PovlensPretraceScale = {side} / ({m} * max(image_width, image_height));\n"
             f"#if ({m} * max(image_width, image_height) > {side + 1})\n"
-            f"  global_settings {{ radiosity {{ pretrace_start {start!r} * PovlensPretraceScale\n"
-            f"                                 pretrace_end {end!r} * PovlensPretraceScale }} }}\n"
+            f"  #ifndef ({RADIOSITY_READ_FLAG})\n"
+            f"    global_settings {{ radiosity {{ pretrace_start {start!r} * PovlensPretraceScale\n"
+            f"                                   pretrace_end {end!r} * PovlensPretraceScale }} }}\n"
+            f"  #end\n"
             f"#end")
 
 

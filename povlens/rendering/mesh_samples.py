@@ -40,7 +40,7 @@ from povlens.plan.options import povray_options_of
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pov.executable import find_povray
-from povlens.pov.mesh import eye_text, write_ray_mesh
+from povlens.pov.mesh import RADIOSITY_READ_FLAG, eye_text, write_ray_mesh
 from povlens.pov.povray_output import povray_failure
 from povlens.pov.render_statistics import (STATISTICS_SWITCHES, render_statistics,
                                            statistics_complete)
@@ -304,6 +304,8 @@ class _SampleRenders:
         self.stacks[k] = stack or ([k], [True], 1)
         radiosity = self._radiosity_args(k)
         pv = self.plan.povray
+        if pv.radiosity_pretrace is not None and "+RFI" in radiosity:
+            radiosity = [*radiosity, f"Declare={RADIOSITY_READ_FLAG}=1"]   # pretrace_block
         height, rows = self._rows_args(k)
         pov = self.folder.batch_wrapper(self.batch)
         tmp = None

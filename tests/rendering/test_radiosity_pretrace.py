@@ -55,6 +55,7 @@ def test_the_pretrace_block_scales_only_runs_larger_than_the_frame():
     text = pretrace_block((0.08, 0.04), (320, 240), 4)
     assert "320 / (4 * max(image_width, image_height))" in text
     assert "#if (4 * max(image_width, image_height) > 321)" in text   # 321: FS#261's column
+    assert "#ifndef (PovlensRadiosityRead)" in text       # a run reading samples keeps it
     assert "pretrace_start 0.08 * PovlensPretraceScale" in text
 
 
