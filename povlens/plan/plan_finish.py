@@ -231,11 +231,12 @@ def finish_plan(opts: ConvertOptions, st: PlanStart, reuse: PlanReuse = PlanReus
 
 #: What a mesh plan of a scene with radiosity says it adds.
 RADIOSITY_CACHE_NOTE = (
-    "radiosity: its samples are computed once, by a pinhole render of the scene that saves "
+    "radiosity: its samples are computed once, by a pinhole render of the frame that saves "
     "them (POV-Ray's Radiosity_File_Name with +RFO), and every lens sample reads them (+RFI) "
-    "instead of redoing the pretrace, when the first two lens samples measure that it pays "
-    "(one computing its own radiosity, one reading the file; radiosity.json in the folder "
-    "records their times and the choice); the scene's radiosity settings are kept")
+    "instead of redoing the pretrace; make's batches and cluster groups of a folder "
+    "'povlens render' has not started first measure whether it pays on their first two lens "
+    "samples (one computing its own radiosity, one reading the file; radiosity.json in the "
+    "folder records their times and the choice); the scene's radiosity settings are kept")
 
 
 def _radiosity_cache(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:

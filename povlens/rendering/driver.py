@@ -123,7 +123,8 @@ def _render_mesh_samples(plan: Plan, lens, table, outdir: Path, todo: list[int],
             or not plan.povray.radiosity_cache or os.environ.get("POVLENS_STACK")
             or recorded_bands(outdir) is not None):
         return render_samples(plan, lens, table, outdir, 0, samples(todo), in_flight=in_flight,
-                              on_done=on_done, stacking=stacking)
+                              on_done=on_done, stacking=stacking,
+                              read_shared=stacking.chained or stacking.runs == 1)
     return render_led(plan, lens, table, outdir, todo, samples, stacking.bands, jobs,
                       in_flight, on_done)
 

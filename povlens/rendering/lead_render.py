@@ -33,6 +33,7 @@ from pathlib import Path
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.rendering.mesh_samples import render_samples
+from povlens.rendering.radiosity_cache import radiosity_cache_for
 from povlens.rendering.run_choice import choose_runs
 from povlens.rendering.sample_stacks import StackPlan, pass_faces, record_layout
 
@@ -56,7 +57,7 @@ class _Companions:
             self.timing = render_samples(
                 plan, lens, table, outdir, 0, self.ks, in_flight=len(self.ks),
                 stop=self.stop_event, on_done=on_done,
-                stacking=StackPlan(1, len(self.ks), 1, False), own_radiosity=True, idle=True)
+                stacking=StackPlan(1, len(self.ks), 1, False), read_shared=True, idle=True)
         except BaseException as e:      # handed to end()
             self.error = e
 
@@ -86,11 +87,13 @@ def render_led(plan: Plan, lens, table, outdir: Path, todo: list[int], samples, 
     chain.unlink(missing_ok=True)           # an earlier render's
     exiting: list = []      # the lead's POV-Ray, saving its radiosity samples as it exits
     record_layout(outdir, 1, {"lead_sample": todo[0]})
+    radiosity_cache_for(plan, outdir)       # made once, on every core, before any reads it
     companions = _Companions(plan, lens, table, outdir, todo[1:max(2, in_flight)], on_done)
     try:
         lead = render_samples(plan, lens, table, outdir, 0, todo[:1], in_flight=in_flight,
                               on_done=on_done, stacking=StackPlan(1, 1, jobs, False, radiosity),
-                              statistics=True, keep_chain=True, exiting=exiting)
+                              statistics=True, keep_chain=True, exiting=exiting,
+                              read_shared=True)
         rest = [k for k in todo[1:] if k not in companions.ks]
         choice = _run_choice(plan, lead, len(todo) - 1, bands, jobs)
         if choice is None or choice.stack:
@@ -106,7 +109,7 @@ def render_led(plan: Plan, lens, table, outdir: Path, todo: list[int], samples, 
             timing = render_samples(plan, lens, table, outdir, 0, samples(rest),
                                     in_flight=in_flight, on_done=on_done,
                                     stacking=StackPlan(1, len(rest), 1, False),
-                                    own_radiosity=True)
+                                    read_shared=True)
             companion_timing = companions.end(stop=False)
     finally:
         companions.stop()
@@ -129,7 +132,7 @@ def _render_stacks(plan: Plan, lens, table, outdir: Path, rest: list[int], sampl
     return render_samples(plan, lens, table, outdir, 0, samples(rest), in_flight=in_flight,
                           on_done=on_done, stacking=StackPlan(bands, runs, threads, True,
                                                               radiosity),
-                          keep_chain=True, wait_first=exiting)
+                          keep_chain=True, wait_first=exiting, read_shared=True)
 
 
 def _led_timing(timing: dict, lead: dict, companions: dict | None, choice) -> dict:

@@ -55,7 +55,8 @@ from povlens.rendering.pixel_sampler import pixel_sampler
 from povlens.util.files import write_text
 from povlens.util.images import write_exr
 from povlens.rendering.photon_map import photon_load_args, photon_map_for
-from povlens.rendering.sample_stacks import (StackPlan, split_stack, stack_bands, stack_plan,
+from povlens.rendering.sample_stacks import (StackPlan, recorded_bands, split_stack, stack_bands,
+                                             stack_plan,
                                              stack_row_args, stack_runs)
 from povlens.rendering.radiosity_cache import (choice_from,
                                                probe_measurement, probes_missing,
@@ -197,7 +198,7 @@ class _SampleRenders:
     def __init__(self, plan: Plan, outdir: Path, batch: int, limit: int = POVRAY_IN_FLIGHT,
                  on_done=None, threads: int = 1, one_run: bool = False,
                  chained: bool = False, statistics: bool = False,
-                 own_radiosity: bool = False, keep_chain: bool = False,
+                 read_shared: bool = False, keep_chain: bool = False,
                  exiting: list | None = None, wait_first=(), idle: bool = False):
         self.plan, self.folder, self.batch = plan, RenderFolder(outdir), batch
         self.on_done = on_done
@@ -231,12 +232,17 @@ class _SampleRenders:
         chosen = sharing_chosen(outdir)
         # one run for every sample left: its own pretrace serves them all, so a file
         # made for it would only add a pinhole render (nothing to choose)
+        # a folder whose layout a lead recorded read the shared samples (lead_render): so
+        # do its samples rendered again (a resume, make, a cluster worker), the same bits
+        read_shared = read_shared or (plan.povray.radiosity_cache
+                                      and recorded_bands(outdir) is not None)
         self.choosing = (plan.povray.radiosity_cache and chosen is None and not one_run
-                         and not chained and not own_radiosity)
+                         and not chained and not read_shared)
+        self.read_shared = read_shared
         if chained and not keep_chain:
             self.folder.radiosity_chain.unlink(missing_ok=True)     # an earlier render's
-        elif not self.choosing and not own_radiosity and not chained and (
-                chosen is not None or not one_run):
+        elif not self.choosing and not chained and (chosen is not None or not one_run
+                                                    or read_shared):
             self.radiosity = radiosity_read_args(radiosity_cache_for(plan, outdir),
                                                  self.samples)
 
@@ -247,6 +253,10 @@ class _SampleRenders:
         before them and save them with their own."""
         if self.chained:
             chain = self.folder.radiosity_chain
+            shared = radiosity_cache_for(self.plan, self.folder.path) if self.read_shared \
+                else None
+            if shared is not None and not chain.is_file():  # the chain starts from them
+                shutil.copyfile(shared, chain)
             return [f"Radiosity_File_Name={os.path.relpath(chain, self.samples)}", "+RFO",
                     *(["+RFI"] if chain.is_file() else [])]
         while self.choosing:
@@ -443,7 +453,7 @@ class _SampleRenders:
 def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: int,
                    samples, points=None, in_flight: int = POVRAY_IN_FLIGHT,
                    stop=None, on_done=None, plan_for=None, stacking=None,
-                   statistics: bool = False, own_radiosity: bool = False,
+                   statistics: bool = False, read_shared: bool = False,
                    keep_chain: bool = False, exiting: list | None = None,
                    wait_first=(), idle: bool = False) -> dict:
     """Trace, write and render lens samples ``samples`` of batch ``batch``, pipelined.
@@ -466,8 +476,10 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     ``plan_for(k)`` the plan to trace sample k with (default ``plan``; plans that
     differ only in the sample count give the same sample k).  ``statistics``: POV-Ray
     prints its statistics and each run is waited for to exit
-    (:mod:`povlens.pov.render_statistics`); ``own_radiosity``: every sample computes its
-    own radiosity (no shared file, nothing to choose); ``keep_chain``: a chained
+    (:mod:`povlens.pov.render_statistics`); ``read_shared``: every run reads the folder's
+    shared radiosity samples (:func:`~povlens.rendering.radiosity_cache.radiosity_cache_for`,
+    made if missing; a chain starts from them), without measuring whether they pay;
+    ``keep_chain``: a chained
     render's radiosity file is the caller's (kept from an earlier call, left for a
     later one); ``exiting`` and ``wait_first``: :class:`_SampleRenders`; ``idle``: the
     POV-Ray runs take only CPU time nothing else wants.  Returns timings: {samples, blocked, rays_and_meshes_s (Python),
@@ -483,7 +495,7 @@ def render_samples(plan: Plan, lens, sampler, outdir: str | os.PathLike, batch: 
     if stacking is None or stacking.bands != bands:
         stacking = StackPlan(bands, 0, 1, False)
     queue = _SampleRenders(plan, outdir, batch, in_flight, on_done, stacking.threads,
-                           stacking.runs == 1, stacking.chained, statistics, own_radiosity,
+                           stacking.runs == 1, stacking.chained, statistics, read_shared,
                            keep_chain, exiting, wait_first, idle)
     seen: list[int] = []
     try:

@@ -133,7 +133,12 @@ def test_radiosity_is_reused_as_the_scene_camera_reuses_it(tmp_path, monkeypatch
     at_origin = _render(tmp_path, "origin", RADIOSITY, extra=extra)
     e_eye = abs(with_eye.mean() - fb.mean()) / fb.mean()
     e_origin = abs(at_origin.mean() - fb.mean()) / fb.mean()
-    assert e_eye < 0.04 and e_origin > 2 * e_eye
+    assert e_eye < 0.04
+    # field passes, their pretrace spaced as the frame's (pov.mesh.pretrace_block), six
+    # runs: means 0.15-0.79 % off against 0.27-3.1 %, one of them the wrong way round
+    # (focal_blur's own radiosity varies as much), RMSE 0.0027 against 0.0075-0.0080
+    if ray_mesh == "pixel":
+        assert e_origin > 2 * e_eye
     rmse_eye = np.sqrt(((with_eye - fb) ** 2).mean())
     # per-pixel meshes, three runs: RMSE 0.0044 against 0.0053-0.0072
-    assert rmse_eye < (0.7 if ray_mesh == "field" else 1.0) * np.sqrt(((at_origin - fb) ** 2).mean())
+    assert rmse_eye < (0.5 if ray_mesh == "field" else 1.0) * np.sqrt(((at_origin - fb) ** 2).mean())

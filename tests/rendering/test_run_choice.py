@@ -47,9 +47,10 @@ def test_a_cheap_scene_runs_each_sample_and_a_radiosity_heavy_one_stacks():
 @needs_povray
 def test_the_lead_sample_chooses_and_hands_on_its_radiosity(tmp_path):
     """A render whose samples stack: its first renders alone with POV-Ray's statistics,
-    and the choice and measurement go to the timing file; the radiosity file it hands
-    on is gone afterwards; the image is the one of one run per sample within
-    radiosity's noise."""
+    and the choice and measurement go to the timing file; every run reads the
+    radiosity samples one pinhole pretrace of the frame saved (radiosity.rca, kept with
+    the folder; no probes), and the file the lead hands on is gone afterwards; the image
+    is the one of one run per sample within radiosity's noise."""
     scene = tmp_path / "rad.pov"
     scene.write_text(RADIOSITY_SCENE)
     _povlens("render", scene, *SIZE, "-o", tmp_path / "led")
@@ -60,7 +61,8 @@ def test_the_lead_sample_chooses_and_hands_on_its_radiosity(tmp_path):
     choice = timing["choice"]
     assert choice["stack"] == (choice["shared_s"] > choice["cost_s"])
     assert timing["runs_together"] == choice["stack"]
-    assert not list((tmp_path / "led").rglob("*.rca"))
+    assert [p.name for p in (tmp_path / "led").rglob("*.rca")] == ["radiosity.rca"]
+    assert not (tmp_path / "led" / "radiosity.json").exists()       # nothing measured
     _povlens("render", scene, *SIZE, "--povray-option", "Radiosity_File_Name=own.rca",
              "-o", tmp_path / "own", env=ONE_PER_RUN)
     assert_same_within_radiosity_noise(tmp_path / "own", tmp_path / "led")

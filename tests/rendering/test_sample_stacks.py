@@ -107,13 +107,15 @@ def test_a_stacked_run_renders_what_one_run_per_sample_renders(tmp_path):
 
 
 @needs_povray
-def test_one_run_shares_its_own_pretrace_and_makes_no_file(tmp_path):
-    """Every sample in one run: no radiosity file, no probes; the image is the one
-    whose samples each compute their own radiosity, within radiosity's noise."""
+def test_one_run_reads_the_frames_radiosity_without_probes(tmp_path):
+    """Every sample in one run: it reads the samples one pinhole pretrace of the frame
+    saved (its own pretrace, scaled to its bands and tiles, would trace bands x m^2 times
+    the frame's; pov.mesh.pretrace_block), without probes; the image is the one whose
+    samples each compute their own radiosity, within radiosity's noise."""
     scene = tmp_path / "rad.pov"
     scene.write_text(RADIOSITY_SCENE)
     _povlens("render", scene, *SIZE, "-o", tmp_path / "one")
-    assert not (tmp_path / "one" / "radiosity.rca").exists()
+    assert (tmp_path / "one" / "radiosity.rca").stat().st_size > 0
     assert not (tmp_path / "one" / "radiosity.json").exists()
     _povlens("render", scene, *SIZE, "--povray-option", "Radiosity_File_Name=own.rca",
              "-o", tmp_path / "own", env=ONE_PER_RUN)
@@ -177,14 +179,15 @@ def test_stacked_runs_hand_on_their_radiosity_samples(tmp_path):
     """More samples than a stack holds: the runs follow one another on every core, each
     reading the radiosity samples of those before it (POV-Ray's +RFI +RFO on one file
     appends: measured on cornell.pov, the second run computed 1,043 samples against
-    5,165); the file is gone afterwards and the image is the per-sample one within
-    radiosity's noise."""
+    5,165), the first starting from the samples one pinhole pretrace of the frame saved
+    (radiosity.rca); the chain's file is gone afterwards and the image is the per-sample
+    one within radiosity's noise."""
     scene = tmp_path / "rad.pov"
     scene.write_text(RADIOSITY_SCENE)
     _povlens("render", scene, *SIZE, "-o", tmp_path / "chain", env={"POVLENS_STACK": "2"})
     timing = json.loads((tmp_path / "chain" / "samples" / "render.timing.json").read_text())
     assert timing["chained"] and timing["bands"] == 2 and timing["samples"] == 4
-    assert not list((tmp_path / "chain").rglob("*.rca"))
+    assert [p.name for p in (tmp_path / "chain").rglob("*.rca")] == ["radiosity.rca"]
     assert not (tmp_path / "chain" / "radiosity.json").exists()     # nothing to choose
     _povlens("render", scene, *SIZE, "--povray-option", "Radiosity_File_Name=own.rca",
              "-o", tmp_path / "own", env=ONE_PER_RUN)
