@@ -17,6 +17,14 @@ the first render that needs it (``povlens render``, each batch of ``make``, each
 worker's copy of a cluster render) and renamed into place when complete, so renders
 racing to make it waste time, never read half a file.
 
+``povlens render`` reads them in every run (:mod:`povlens.rendering.lead_render`): a
+field pass's own pretrace is spaced by the tiled image it renders, and either leaves
+the cache to the final trace, tile by tile (a dot lattice), or, scaled to the frame's
+spacing, traces m^2 times its pretrace (:func:`povlens.pov.mesh.pretrace_block`).  The
+measurement below stays for ``make``'s batches and cluster groups of a folder it has
+not started (and for the record: the "own" side of the gamma_showcase and patio figures
+was the unscaled pretrace, faster for its sparse cache).
+
 Whether sharing pays is measured, not guessed: a scene whose radiosity is cheap beside
 its tracing can lose by it (the pinhole render's cost, and lens samples that trace slower
 through the denser shared samples: ``gamma/gamma_showcase.pov``'s field-mesh sample
