@@ -44,7 +44,8 @@ def pinhole_product(plan: Plan, outdir: str | os.PathLike, written: Path, final:
     try:
         povray_render(folder.wrapper("pinhole"), image, *size, threads=os.cpu_count() or 1,
                       library_paths=[Path(plan.inputs.scene).parent],
-                      povray_options=povray_options_of(plan.inputs), extra_args=extra_args)
+                      povray_options=povray_options_of(plan.inputs), extra_args=extra_args,
+                      products=[written])  # whole: a radiosity file ends after the image
         if written.is_file() and written.stat().st_size > 0:
             os.replace(written, final)
     finally:

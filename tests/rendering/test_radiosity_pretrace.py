@@ -125,6 +125,10 @@ def test_field_passes_draw_no_dot_lattice(tmp_path, extra, env):
     m = plan["field_mesh"]["interleave"]
     assert m == 4
     assert (out / "radiosity.rca").is_file() == (not extra)
+    if not extra:   # whole: POV-Ray finishes it ~0.1 s after its image, when it was stopped
+        lines = (out / "radiosity.rca").read_text().split("\n")
+        assert lines[-1] == "" and len(lines) > 100
+        assert {len(line.split("\t")) for line in lines[:-1]} == {11}
     image = read_image(out / "image.exr")
     assert 0.1 < image[..., :3].mean() < 0.2
     assert _phase_spread(image, m) < 0.004
