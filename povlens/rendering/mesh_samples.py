@@ -188,6 +188,10 @@ MESH_SWITCHES = ("-A",)
 #: (measurements: docs/decisions/planning.md, "POV-Ray processes in flight").
 POVRAY_IN_FLIGHT = 4
 
+#: POV-Ray's fatal-error log of a sample's run, in its temporary folder (``+GF``).
+FATAL_LOG = "fatal.log"
+
+
 class _SampleRenders:
     """POV-Ray processes rendering single lens samples of a batch, at most
     ``limit`` at once.  :meth:`start` returns once a slot is free; :meth:`finish`
@@ -331,7 +335,10 @@ class _SampleRenders:
                 extra_args=[*MESH_SWITCHES, *radiosity, *self.photons,
                             *(STATISTICS_SWITCHES if self.statistics else ()),
                             f"Declare=PovlensFrame={k}", *rows])
-            cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches)
+            # the fatal-error log too: POV-Ray's stderr sometimes lacks the parse error's
+            # own line (which include file is missing), the log has it
+            cmd = povray_command(find_povray(), pov.name, f"{rel}/f.exr", switches,
+                                 error_log=FATAL_LOG)
             with interrupts_deferred(), open(tmp / "stderr.txt", "w") as err:
                 proc = start_povray(cmd, self.samples, err, idle=self.idle)
                 self.running[k] = (proc, tmp, time.perf_counter())   # abort() sees it
@@ -401,7 +408,9 @@ class _SampleRenders:
         if (proc.returncode != 0 and k not in self.early) or not out.exists():
             # its real cause: a full disk, a parse error in the wrapper, or the scene
             stderr = (tmp / "stderr.txt").read_text(errors="replace")
-            raise povray_failure(pov, self.samples, proc.returncode, stderr, "",
+            log = tmp / FATAL_LOG
+            log_text = log.read_text(errors="replace") if log.is_file() else ""
+            raise povray_failure(pov, self.samples, proc.returncode, stderr, log_text,
                                  self.folder.sample_image(k), what=self._what(k, pov),
                                  hint="fix the scene, or run 'make' in the folder to see "
                                       "the command")
