@@ -234,12 +234,12 @@ class _SampleRenders:
         self.probes: dict[int, str] = {}            # sample -> "own" / "shared", running
         self.measured: dict[str, dict] = {}         # kind -> its finished measurement
         chosen = sharing_chosen(outdir)
-        # one run for every sample left: its own pretrace serves them all, so a file
-        # made for it would only add a pinhole render (nothing to choose)
         # a folder whose layout a lead recorded read the shared samples (lead_render): so
         # do its samples rendered again (a resume, make, a cluster worker), the same bits
         read_shared = read_shared or (plan.povray.radiosity_cache
                                       and recorded_bands(outdir) is not None)
+        # nothing to choose for one run of every sample left or a chain (one pretrace
+        # serves them all), nor where the caller has chosen to read the shared samples
         self.choosing = (plan.povray.radiosity_cache and chosen is None and not one_run
                          and not chained and not read_shared)
         self.read_shared = read_shared
@@ -257,10 +257,10 @@ class _SampleRenders:
         before them and save them with their own."""
         if self.chained:
             chain = self.folder.radiosity_chain
-            shared = radiosity_cache_for(self.plan, self.folder.path) if self.read_shared \
-                else None
-            if shared is not None and not chain.is_file():  # the chain starts from them
-                shutil.copyfile(shared, chain)
+            if self.read_shared and not chain.is_file():    # the chain starts from them
+                shared = radiosity_cache_for(self.plan, self.folder.path)
+                if shared is not None:
+                    shutil.copyfile(shared, chain)
             return [f"Radiosity_File_Name={os.path.relpath(chain, self.samples)}", "+RFO",
                     *(["+RFI"] if chain.is_file() else [])]
         while self.choosing:
