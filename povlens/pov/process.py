@@ -508,7 +508,8 @@ class RenderJob:
         self._stack, self._workdir, self._tmp, self._log, self._err = stack, workdir, tmp, log, err
         self._timeout, self._deadline = timeout, deadline
         self._started = time.monotonic()
-        self._done = False
+        self._done = False      # wait() or cancel() called
+        self._over = False      # POV-Ray judged finished (or failed, or stopped)
 
     def wait(self) -> Path:
         """Wait for POV-Ray; rename the image into place and return its path.
@@ -524,15 +525,25 @@ class RenderJob:
             self._kill()
             self._stack.__exit__(type(exc), exc, exc.__traceback__)  # drops the temporary image
             raise
+        finally:
+            self._over = True
         self._stack.close()  # renames the image to out_path, removes the log
         return self.out_path
+
+    def finished(self) -> bool:
+        """Whether :meth:`wait` would return at once: POV-Ray has exited, or has written
+        its image and every product (:func:`povray_finished`).  Never blocks."""
+        if self._done:          # over, or another thread's wait() is judging it
+            return self._over
+        return povray_finished(self.proc, self._tmp, time.monotonic() - self._started,
+                               self._products)
 
     def cancel(self) -> None:
         """Stop POV-Ray (if still running) and remove its temporary files (a Ctrl-C
         or SIGTERM meanwhile waits until they are gone)."""
         if self._done:
             return
-        self._done = True
+        self._done = self._over = True
         with interrupts_deferred():
             self._kill()
             try:

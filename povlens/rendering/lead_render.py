@@ -38,7 +38,7 @@ from pathlib import Path
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.rendering.mesh_samples import render_samples
-from povlens.rendering.radiosity_cache import radiosity_cache_for
+from povlens.rendering.radiosity_cache import cancel_radiosity_cache, start_radiosity_cache
 from povlens.rendering.run_choice import choose_runs
 from povlens.rendering.sample_stacks import StackPlan, pass_faces, record_layout
 
@@ -92,7 +92,9 @@ def render_led(plan: Plan, lens, table, outdir: Path, todo: list[int], samples, 
     chain.unlink(missing_ok=True)           # an earlier render's
     exiting: list = []      # the lead's POV-Ray, saving its radiosity samples as it exits
     record_layout(outdir, 1, {"lead_sample": todo[0]})
-    radiosity_cache_for(plan, outdir)       # made once, on every core, before any reads it
+    # made once, on every core, while the first meshes are written; no run starts
+    # before it is done (_SampleRenders.pending)
+    start_radiosity_cache(plan, outdir)
     companions = _Companions(plan, lens, table, outdir, todo[1:max(2, in_flight)], on_done)
     try:
         lead = render_samples(plan, lens, table, outdir, 0, todo[:1], in_flight=in_flight,
@@ -120,6 +122,7 @@ def render_led(plan: Plan, lens, table, outdir: Path, todo: list[int], samples, 
         companions.stop()
         if companions.ks:
             companions.thread.join()
+        cancel_radiosity_cache(outdir)      # an error before any run waited for it
         _stop(exiting)
         chain.unlink(missing_ok=True)
     return _led_timing(timing, lead, companion_timing, choice)

@@ -58,9 +58,9 @@ from povlens.rendering.photon_map import photon_load_args, photon_map_for
 from povlens.rendering.sample_stacks import (StackPlan, recorded_bands, split_stack, stack_bands,
                                              stack_plan,
                                              stack_row_args, stack_runs)
-from povlens.rendering.radiosity_cache import (choice_from,
-                                               probe_measurement, probes_missing,
-                                               radiosity_cache_for, radiosity_read_args,
+from povlens.rendering.radiosity_cache import (choice_from, probe_measurement,
+                                               probes_missing, radiosity_cache_for,
+                                               radiosity_cache_ready, radiosity_read_args,
                                                record_probes, sharing_chosen)
 from povlens.util.signals import interrupts_deferred
 
@@ -245,10 +245,12 @@ class _SampleRenders:
         self.read_shared = read_shared
         if chained and not keep_chain:
             self.folder.radiosity_chain.unlink(missing_ok=True)     # an earlier render's
-        elif not self.choosing and not chained and (chosen is not None or not one_run
-                                                    or read_shared):
-            self.radiosity = radiosity_read_args(radiosity_cache_for(plan, outdir),
-                                                 self.samples)
+        # the shared samples' switches, found when the first run starts: a pinhole render
+        # making them (start_radiosity_cache) runs while the first meshes are written
+        self.read_pending = not self.choosing and not chained and (
+            chosen is not None or not one_run or read_shared)
+        # runs whose meshes are written, started once that render is done: (k, stack)
+        self.pending: list[tuple[int, tuple | None]] = []
 
     def _radiosity_args(self, k: int) -> list[str]:
         """Sample k's radiosity switches; while choosing, a probe's (module doc of
@@ -278,6 +280,10 @@ class _SampleRenders:
             self._reap(block=False)
             if self.choosing and not self._settle(final=False):
                 time.sleep(0.01)
+        if self.read_pending:
+            self.radiosity = radiosity_read_args(
+                radiosity_cache_for(self.plan, self.folder.path), self.samples)
+            self.read_pending = False
         return self.radiosity
 
     def _settle(self, final: bool) -> bool:
@@ -310,9 +316,27 @@ class _SampleRenders:
 
     def start(self, k: int, stack: tuple[list[int], list[bool], int] | None = None) -> None:
         """Start the run of sample k, or of the passes ``(ks, drawn, bands)`` of one
-        stack whose first is k (:mod:`povlens.rendering.sample_stacks`)."""
-        while len(self.running) >= self.limit:
+        stack whose first is k (:mod:`povlens.rendering.sample_stacks`); while the
+        shared radiosity samples it reads are still being made, it waits in
+        ``pending`` and this returns at once (the next sample's mesh is written
+        meanwhile)."""
+        while len(self.running) + len(self.pending) >= self.limit:
             self._reap(block=True)
+        if self.read_pending and (self.pending or not radiosity_cache_ready(
+                self.plan, self.folder.path)):
+            self.pending.append((k, stack))
+            return
+        self._launch(k, stack)
+
+    def _launch_pending(self, block: bool) -> None:
+        """Start the runs waiting for the shared radiosity samples once they are made
+        (``block``: wait for them)."""
+        if self.pending and (block or radiosity_cache_ready(self.plan, self.folder.path)):
+            while self.pending:
+                self._launch(*self.pending.pop(0))
+
+    def _launch(self, k: int, stack: tuple[list[int], list[bool], int] | None) -> None:
+        """Start POV-Ray on the run of :meth:`start`."""
         while self.wait_first:      # an earlier run still saving the radiosity this one reads
             self.wait_first.pop().wait()
         self.stacks[k] = stack or ([k], [True], 1)
@@ -383,6 +407,7 @@ class _SampleRenders:
         return True
 
     def _reap(self, block: bool) -> None:
+        self._launch_pending(block=block and not self.running)
         while True:
             done = [k for k, (p, tmp, _) in self.running.items() if self._finished(k, p, tmp)]
             if done or not block:
@@ -437,10 +462,11 @@ class _SampleRenders:
     def finish(self, stop=None) -> None:
         """Wait for every run; once ``stop`` (a :class:`threading.Event`) is set, stop
         those left instead."""
-        while self.running:
+        while self.running or self.pending:
             if stop is not None and stop.is_set():
                 self.abort()
                 return
+            self._launch_pending(block=not self.running)
             self._reap(block=False)
             if self.running:
                 time.sleep(0.005)
@@ -455,6 +481,9 @@ class _SampleRenders:
             p.wait()
             shutil.rmtree(tmp, ignore_errors=True)
             self.folder.sample_mesh(k).unlink(missing_ok=True)
+        for k, _ in self.pending:
+            self.folder.sample_mesh(k).unlink(missing_ok=True)
+        self.pending.clear()
         self.running.clear()
         self.stacks.clear()
 

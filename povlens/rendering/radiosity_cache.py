@@ -47,20 +47,107 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 from pathlib import Path
 
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.pov.render_statistics import render_statistics
-from povlens.rendering.pinhole_products import pinhole_product
+from povlens.rendering.pinhole_products import (PinholeProduct, pinhole_product,
+                                                start_pinhole_product)
 from povlens.util.files import temporary_path, write_text
 
-__all__ = ["radiosity_cache_for", "radiosity_read_args", "sharing_chosen", "probes_missing",
+__all__ = ["radiosity_cache_for", "start_radiosity_cache", "radiosity_cache_ready",
+           "cancel_radiosity_cache", "radiosity_read_args", "sharing_chosen", "probes_missing",
            "choice_from", "probe_measurement", "record_probes", "PROBES"]
 
 #: The two measurements the choice compares: a lens sample computing its own radiosity,
 #: and one reading the shared samples.
 PROBES = ("own", "shared")
+
+
+class _Making:
+    """The pinhole render making a folder's radiosity samples, waited for by whichever
+    thread needs them first; the others get its result (or its error)."""
+
+    def __init__(self, job: PinholeProduct):
+        self.job = job
+        self.lock = threading.Lock()
+        self.result: Path | None = None
+        self.error: BaseException | None = None
+        self.done = False
+
+    def wait(self) -> Path | None:
+        with self.lock:
+            if not self.done:
+                try:
+                    self.result = self.job.wait()
+                except BaseException as e:
+                    self.error = e
+                    self.job.cancel()
+                finally:
+                    self.done = True
+        if self.error is not None:
+            raise self.error
+        return self.result
+
+
+#: Radiosity files being made in this process: their path -> :class:`_Making`.
+_MAKING: dict[Path, _Making] = {}
+_MAKING_LOCK = threading.Lock()
+
+
+def _shared_file(plan: Plan, outdir) -> Path | None:
+    """The folder's radiosity file if the plan shares one, else None."""
+    if not plan.povray.radiosity_cache or sharing_chosen(outdir) is False:
+        return None
+    return RenderFolder(outdir).radiosity_cache.absolute()
+
+
+def _complete(cache: Path) -> bool:
+    return cache.is_file() and cache.stat().st_size > 0
+
+
+def start_radiosity_cache(plan: Plan, outdir: str | os.PathLike) -> None:
+    """Start making the folder's radiosity samples, if the plan shares them and they are
+    missing, and return at once: :func:`radiosity_cache_for` then waits for that render
+    (in any thread), :func:`radiosity_cache_ready` says whether it is done and
+    :func:`cancel_radiosity_cache` stops it.  The time it takes (a pinhole render: on a
+    small scene mostly POV-Ray's idle start-up and exit) goes to writing the first lens
+    samples' meshes meanwhile."""
+    cache = _shared_file(plan, outdir)
+    if cache is None or _complete(cache):
+        return
+    with _MAKING_LOCK:
+        if cache not in _MAKING:
+            _MAKING[cache] = _Making(start_pinhole_product(
+                plan, outdir, (tmp := temporary_path(cache)), cache,
+                (plan.film.width_px, plan.film.height_px),
+                [f"Radiosity_File_Name={tmp.name}", "+RFO"]))
+
+
+def radiosity_cache_ready(plan: Plan, outdir: str | os.PathLike) -> bool:
+    """False while :func:`start_radiosity_cache`'s render of the folder's radiosity
+    samples runs; True otherwise (:func:`radiosity_cache_for` then returns without
+    waiting for a render this process started).  Never blocks."""
+    cache = _shared_file(plan, outdir)
+    with _MAKING_LOCK:
+        making = _MAKING.get(cache) if cache is not None else None
+    return making is None or making.done or making.job.finished()
+
+
+def cancel_radiosity_cache(outdir: str | os.PathLike) -> None:
+    """Stop a render of the folder's radiosity samples that
+    :func:`start_radiosity_cache` started and nothing waited for (an error, an
+    interrupt)."""
+    cache = RenderFolder(outdir).radiosity_cache.absolute()
+    with _MAKING_LOCK:
+        making = _MAKING.pop(cache, None)
+    if making is not None:
+        with making.lock:
+            if not making.done:
+                making.done = True
+                making.job.cancel()
 
 
 def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
@@ -77,16 +164,26 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     Path or None
         ``RenderFolder(outdir).radiosity_cache``; made by one pinhole render of the
         folder's ``pinhole.pov`` at the image's size, all cores
-        (:func:`povlens.rendering.pinhole_products.pinhole_product`).
+        (:func:`povlens.rendering.pinhole_products.pinhole_product`), or by the one
+        :func:`start_radiosity_cache` started, waited for.
         None also when the folder's first lens sample found that sharing does not pay
         (:func:`sharing_chosen`).
     """
-    if not plan.povray.radiosity_cache or sharing_chosen(outdir) is False:
+    cache = _shared_file(plan, outdir)
+    if cache is None:
         return None
-    folder = RenderFolder(outdir)
-    cache = folder.radiosity_cache
-    if cache.is_file() and cache.stat().st_size > 0:
-        return cache
+    with _MAKING_LOCK:
+        making = _MAKING.get(cache)
+    if making is not None:
+        try:
+            made = making.wait()
+        finally:
+            with _MAKING_LOCK:
+                if _MAKING.get(cache) is making:
+                    del _MAKING[cache]
+        return None if made is None else RenderFolder(outdir).radiosity_cache
+    if _complete(cache):
+        return RenderFolder(outdir).radiosity_cache
     tmp = temporary_path(cache)
     return pinhole_product(plan, outdir, tmp, cache, (plan.film.width_px, plan.film.height_px),
                            [f"Radiosity_File_Name={tmp.name}", "+RFO"])

@@ -1,0 +1,104 @@
+"""The shared radiosity samples are made while the first lens samples' meshes are
+written (issue 25): :func:`start_radiosity_cache` returns at once, runs that read the
+file wait for it without holding up the meshes after theirs, and a render that fails
+or is stopped leaves no half-made file."""
+
+from __future__ import annotations
+
+import shutil
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from povlens.plan.convert import convert
+from povlens.plan.render_folder import RenderFolder
+from povlens.rendering import mesh_samples
+from povlens.rendering.folder_inputs import lens_for, pupil_table_for
+from povlens.rendering.radiosity_cache import (cancel_radiosity_cache, radiosity_cache_for,
+                                               radiosity_cache_ready, start_radiosity_cache)
+from povlens.rendering.sample_stacks import StackPlan
+from tests.conftest import paper_options
+from tests.rendering.test_radiosity_cache import RADIOSITY_SCENE
+
+pytestmark = pytest.mark.skipif(shutil.which("povray") is None, reason="POV-Ray not installed")
+
+
+@pytest.fixture
+def folder(tmp_path):
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    out = tmp_path / "out"
+    plan = convert(paper_options(tmp_path, scene=str(scene), focus=None))
+    assert plan.povray.radiosity_cache
+    return out, plan
+
+
+def _leftovers(out: Path) -> list[str]:
+    """Temporary files of a pinhole render left in the folder."""
+    return sorted(p.name for p in out.iterdir() if ".tmp" in p.name or p.name.startswith("."))
+
+
+def test_the_file_is_made_in_the_background_and_waited_for_once(folder):
+    out, plan = folder
+    start_radiosity_cache(plan, out)
+    assert not radiosity_cache_ready(plan, out)      # POV-Ray takes >0.2 s to start
+    start_radiosity_cache(plan, out)                 # a second call starts nothing more
+    got = []
+    threads = [threading.Thread(target=lambda: got.append(radiosity_cache_for(plan, out)))
+               for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    cache = RenderFolder(out).radiosity_cache
+    assert got == [cache] * 3
+    assert cache.stat().st_size > 0 and cache.read_bytes().endswith(b"\n")
+    assert radiosity_cache_ready(plan, out)
+    assert _leftovers(out) == []
+
+
+def test_a_cancelled_render_leaves_nothing(folder):
+    out, plan = folder
+    start_radiosity_cache(plan, out)
+    time.sleep(0.05)
+    cancel_radiosity_cache(out)
+    assert not RenderFolder(out).radiosity_cache.exists()
+    assert _leftovers(out) == []
+    assert radiosity_cache_ready(plan, out)          # nothing is being made any more
+    # made again when asked for
+    assert radiosity_cache_for(plan, out).stat().st_size > 0
+
+
+def test_meshes_are_written_while_the_file_is_made_and_no_run_starts_before_it(folder,
+                                                                             monkeypatch):
+    out, plan = folder
+    cache = RenderFolder(out).radiosity_cache
+    events = []
+    write_mesh, start_povray = mesh_samples._write_mesh, mesh_samples.start_povray
+
+    def writing(plan_, lens, table, outdir, k, **kw):
+        drawn = write_mesh(plan_, lens, table, outdir, k, **kw)
+        events.append(("mesh", k, cache.is_file()))
+        return drawn
+
+    def starting(cmd, cwd, err, **kw):
+        events.append(("run", cmd, cache.is_file()))
+        return start_povray(cmd, cwd, err, **kw)
+
+    monkeypatch.setattr(mesh_samples, "_write_mesh", writing)
+    monkeypatch.setattr(mesh_samples, "start_povray", starting)
+    lens = lens_for(plan)
+    table = pupil_table_for(out, plan, lens)
+    start_radiosity_cache(plan, out)
+    mesh_samples.render_samples(plan, lens, table, out, 0, [0, 1, 2, 3], in_flight=4,
+                                stacking=StackPlan(1, 4, 1, False), read_shared=True)
+    runs = [e for e in events if e[0] == "run"]
+    meshes = [e for e in events if e[0] == "mesh"]
+    assert len(meshes) == 4 and len(runs) == 4
+    assert all(made for _, _, made in runs)          # every run read the whole file
+    assert not meshes[1][2]                          # the second mesh came before it
+    assert events.index(meshes[1]) < events.index(runs[0])
+    assert all(RenderFolder(out).sample_done(k) for k in range(4))
+    assert _leftovers(out) == []
