@@ -377,8 +377,12 @@ def build_field_meshes(ray_field, placement, models: list[UVModel], grid: tuple[
     rays_f = ray_field(np.concatenate([p.fit_x for p in pts]),
                        np.concatenate([p.fit_y for p in pts]), tile_f)
     out, origin = [], origin_world
+    # tile i's rays are a contiguous run of each call's: slices, not masks
+    ends_v, ends_f = np.cumsum([len(p.x) for p in pts]), np.cumsum([len(p.fit_x) for p in pts])
     for i, (m, p) in enumerate(zip(models, pts)):
-        mesh = encode_field_mesh(p, take_rays(rays_v, tile_v == i), take_rays(rays_f, tile_f == i),
+        sel_v = slice(ends_v[i] - len(p.x), ends_v[i])
+        sel_f = slice(ends_f[i] - len(p.fit_x), ends_f[i])
+        mesh = encode_field_mesh(p, take_rays(rays_v, sel_v), take_rays(rays_f, sel_f),
                                  placement, m, grid, eps, pixel_angle_rad, origin)
         origin = mesh.matrix[3]
         out.append(mesh)
@@ -386,7 +390,8 @@ def build_field_meshes(ray_field, placement, models: list[UVModel], grid: tuple[
 
 
 def take_rays(rays, sel):
-    """The rays ``sel`` (a boolean or index array) of a :class:`povlens.pupil.field.FieldRays`."""
+    """The rays ``sel`` (a slice, a boolean or index array) of a
+    :class:`povlens.pupil.field.FieldRays`."""
     return dataclasses.replace(rays, origin_mm=rays.origin_mm[sel], direction=rays.direction[sel],
                                exists=rays.exists[sel], margin_mm2=rays.margin_mm2[sel],
                                passed=rays.passed[sel])

@@ -27,19 +27,18 @@ __all__ = ["pass_mask", "pass_masks", "field_transmission", "PASS", "FAIL", "UNS
 PASS, FAIL, UNSURE = 1, 2, 3
 
 
-def _second_difference_bound(grid: np.ndarray) -> float:
-    """Largest |second difference| of a (ny, nx) grid along x, y and both diagonals
-    (non-finite entries ignored)."""
-    out = 0.0
+def _second_difference_bounds(grid: np.ndarray) -> np.ndarray:
+    """(S,) largest |second difference| of each of the (ny, nx, S) grids along x, y and
+    both diagonals (non-finite entries ignored; 0 where there is none)."""
+    out = np.zeros(grid.shape[-1])
     for a, b, c in [(grid[:, :-2], grid[:, 1:-1], grid[:, 2:]),
                     (grid[:-2], grid[1:-1], grid[2:]),
                     (grid[:-2, :-2], grid[1:-1, 1:-1], grid[2:, 2:]),
                     (grid[:-2, 2:], grid[1:-1, 1:-1], grid[2:, :-2])]:
-        with np.errstate(invalid="ignore"):
-            d = np.abs(a - 2 * b + c)
-        d = d[np.isfinite(d)]
-        if d.size:
-            out = max(out, float(d.max()))
+        if a.size:
+            with np.errstate(invalid="ignore"):
+                d = np.abs(a - 2 * b + c)
+            out = np.maximum(out, np.where(np.isfinite(d), d, 0.0).max(axis=(0, 1)))
     return out
 
 
@@ -89,8 +88,7 @@ class _Tile:
     def __init__(self, node_x, node_y, node_margin, pixel_x, pixel_y, safety, sub_px):
         self.node_x, self.node_y, self.pixel_x, self.pixel_y = node_x, node_y, pixel_x, pixel_y
         self.S = node_margin.shape[2]
-        self.delta = np.array([safety / 8.0 * _second_difference_bound(node_margin[..., i])
-                               for i in range(self.S)])
+        self.delta = safety / 8.0 * _second_difference_bounds(node_margin)
         cls = _classify(node_margin, self.delta)
         self.ccol, self.crow = _cells_of(pixel_x, node_x), _cells_of(pixel_y, node_y)
         self.passed = cls[self.crow[:, None], self.ccol[None, :]] == PASS
