@@ -24,10 +24,11 @@ from povlens.plan.auto import choose_method, measure_depth_map, start_depth_prob
 from povlens.plan.autofocus import pinhole_focus_note, resolve_focus
 from povlens.plan.depth_probe import atmosphere_note, depth_limits, probe_record
 from povlens.plan.dispersion_plan import colour_decision
-from povlens.plan.plan_finish import PlanReuse, finish_plan, make_plan, make_plan_with_lens
+from povlens.plan.plan_finish import (PlanReuse, finish_plan, make_plan, make_plan_with_lens,
+                                     shared_photon_settings, shares_radiosity)
 from povlens.plan.plan_start import PlanStart, start_plan
 from povlens.plan.options import METHODS, ConvertOptions, with_povray_options_checked
-from povlens.plan.folder_writer import write_folder
+from povlens.plan.folder_writer import write_folder, write_pinhole_wrapper
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import AdaptiveSampling, Decision, Plan
 from povlens.pov.executable import povray_version
@@ -165,7 +166,26 @@ def _keep_speculative_view(view: speculative.SpeculativeView, outdir: Path) -> N
     os.replace(view.out_path, RenderFolder(outdir).view_image("focal-blur"))
 
 
-def convert(opts: ConvertOptions, render_early=None, depth_probe=None) -> Plan:
+def _radiosity_early(opts: ConvertOptions, out: Path, start_radiosity, cleanup):
+    """``on_start`` of :func:`make_plan_with_lens`: when the plan will share the
+    radiosity samples, write ``pinhole.pov`` and ``start_radiosity(opts, start, out)``
+    (stopped by ``cleanup`` if the conversion fails)."""
+    if start_radiosity is None:
+        return None
+
+    def on_start(start: PlanStart) -> None:
+        if not shares_radiosity(opts, start):
+            return
+        write_pinhole_wrapper(out, opts.scene, start.povray_camera,
+                              shared_photon_settings(opts, start))
+        cancel = start_radiosity(opts, start, out)
+        if cancel is not None:
+            cleanup.callback(cancel)
+    return on_start
+
+
+def convert(opts: ConvertOptions, render_early=None, depth_probe=None,
+            start_radiosity=None) -> Plan:
     """Write OUTDIR (plan.json, wrappers, Makefile) and return the plan.
 
     Parameters
@@ -192,6 +212,10 @@ def convert(opts: ConvertOptions, render_early=None, depth_probe=None) -> Plan:
         :func:`~povlens.plan.auto.start_depth_probe` ``(opts, film, plan)`` (default:
         that function); a focus pull's frames share one
         (:class:`povlens.plan.probe_reuse.ProbeReuse`).
+    start_radiosity : for a mesh plan sharing the radiosity samples, called as
+        ``start_radiosity(opts, start, outdir)`` once the :class:`PlanStart` is known and
+        ``pinhole.pov`` written: it starts making them while the plan is finished and
+        returns what stops that if the conversion fails (:func:`_radiosity_early`).
 
     Returns
     -------
@@ -213,8 +237,9 @@ def convert(opts: ConvertOptions, render_early=None, depth_probe=None) -> Plan:
             choice = _choose_automatically(opts, render_early, cleanup, depth_probe)
             opts = choice.chosen
         opts, adaptive, range_info = _adaptive_sampling(opts, choice)
-        plan = (make_plan(opts) if choice is None
-                else finish_plan(opts, choice.start, choice.reuse)[0])
+        plan = (make_plan_with_lens(opts, _radiosity_early(opts, out, start_radiosity,
+                                                           cleanup))[0]
+                if choice is None else finish_plan(opts, choice.start, choice.reuse)[0])
         if adaptive is not None:
             apply_to_plan(plan, adaptive, opts.sampling.batch_size)
         if choice is not None:

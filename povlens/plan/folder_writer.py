@@ -35,7 +35,8 @@ from povlens.pov.sdl import pov_string, pov_vector, read_template
 from povlens.util.files import write_text
 
 __all__ = ["write_folder", "write_if_changed", "focal_blur_text", "blur_settings",
-           "stale_samples", "invalidate_outputs", "SAMPLE_INDEPENDENT_INPUTS"]
+           "stale_samples", "invalidate_outputs", "SAMPLE_INDEPENDENT_INPUTS",
+           "write_pinhole_wrapper"]
 
 #: Plan inputs that do not change what lens sample k renders: the sample count
 #: (scrambled-Sobol point k is the same for any count), how samples are batched,
@@ -60,6 +61,23 @@ def _scene_include(plan: Plan, outdir: Path, wrapper_dir: Path | None = None) ->
     relative path, or the folder's ASCII link to it (:func:`include_text`)."""
     return include_text(plan.inputs.scene, wrapper_dir or outdir,
                         RenderFolder(outdir).scene_link)
+
+
+def write_pinhole_wrapper(outdir: Path, scene: str, camera, photon_settings: str | None
+                          ) -> Path:
+    """Write the folder's ``pinhole.pov``: ``scene`` through the plan's pinhole
+    ``camera`` (a :class:`~povlens.plan.schema.PovrayCamera`), with the photons block
+    that saves the map when ``photon_settings`` (the plan's ``povray.photon_settings``)
+    are shared.  :func:`write_folder` writes it; a render that makes the radiosity
+    samples before the plan is finished writes the same text first."""
+    folder = RenderFolder(outdir)
+    ph = RenderFolder.photon_map_names()
+    path = folder.wrapper("pinhole")
+    write_if_changed(path, pinhole_wrapper(
+        include_text(scene, outdir, folder.scene_link), camera.location, camera.direction,
+        camera.right, camera.up,
+        photons=photon_map_block(photon_settings, "save_file", ph["save"], ph["save_flag"])))
+    return path
 
 
 def blur_settings(plan: Plan, settings: FocalBlurSettings | None = None) -> dict:
@@ -168,12 +186,8 @@ def write_folder(outdir: Path, plan: Plan) -> None:
     if old is not None and (old.inputs.to_dict() != plan.inputs.to_dict()
                             or _sample_layout(old) != _sample_layout(plan)):
         invalidate_outputs(outdir, stale_samples(old, plan))
-    cam = plan.povray_camera
-    ph = RenderFolder.photon_map_names()
-    write_if_changed(folder.wrapper("pinhole"), pinhole_wrapper(
-        _scene_include(plan, outdir), cam.location, cam.direction, cam.right, cam.up,
-        photons=photon_map_block(plan.povray.photon_settings, "save_file", ph["save"],
-                                 ph["save_flag"])))
+    write_pinhole_wrapper(outdir, plan.inputs.scene, plan.povray_camera,
+                          plan.povray.photon_settings)
     write_if_changed(folder.wrapper("focal-blur"), focal_blur_text(plan, outdir))
     if plan.inputs.method == "mesh":
         folder.samples.mkdir(exist_ok=True)

@@ -44,7 +44,7 @@ from povlens.util.threads import run_in_background
 
 __all__ = ["PlanReuse", "finish_plan", "make_plan", "make_plan_with_lens",
            "check_shift_sees_light", "shift_focal_blur_note", "MESH_ANTIALIAS_NOTE",
-           "PINHOLE_NOTE"]
+           "PINHOLE_NOTE", "shares_radiosity", "shared_photon_settings"]
 
 #: The note of a pinhole plan, which skips what only the lens's blur needs
 #: (:func:`finish_plan`): ``model_error`` is empty, and the plan builds no exit-pupil
@@ -249,13 +249,34 @@ def _radiosity_cache(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:
         plan.add_note(f"radiosity: {_WRITES_NOTE.format(where=st.scene_writes[0])} its own "
                       f"radiosity samples")
         return
-    if any("radiosity_file" in o.lower() or o.lower().lstrip("+-").startswith("rf")
-           for o in st.povray.extra_options):
+    if _names_radiosity_file(st):
         plan.add_note("radiosity: the POV-Ray options name a radiosity file, so each lens "
                       "sample computes its own radiosity samples")
         return
     plan.povray = dataclasses.replace(plan.povray, radiosity_cache=True)
     plan.add_note(RADIOSITY_CACHE_NOTE)
+
+
+def _names_radiosity_file(st: PlanStart) -> bool:
+    """Whether the user's POV-Ray options name a radiosity file (or its switches)."""
+    return any("radiosity_file" in o.lower() or o.lower().lstrip("+-").startswith("rf")
+               for o in st.povray.extra_options)
+
+
+def shares_radiosity(opts: ConvertOptions, st: PlanStart) -> bool:
+    """Whether the plan :func:`finish_plan` makes of ``opts`` and ``st`` shares the
+    radiosity samples (its ``povray.radiosity_cache``), known before the plan is."""
+    return (opts.sampling.method == "mesh" and "radiosity" in st.scene_settings
+            and not st.scene_writes and not _names_radiosity_file(st))
+
+
+def shared_photon_settings(opts: ConvertOptions, st: PlanStart) -> str:
+    """The photons items the plan of ``opts`` and ``st`` shares a map of (its
+    ``povray.photon_settings``; "" when none), known before the plan is."""
+    if (opts.sampling.method != "mesh" or "photons" not in st.scene_settings
+            or st.scene_writes or not st.scene_photons):
+        return ""
+    return st.scene_photons
 
 
 #: Why a scene that writes files while it is parsed shares nothing between lens samples.
@@ -283,7 +304,8 @@ def _photon_map(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:
                       "macro, a name it cannot evaluate, or the scene's own save_file or "
                       "load_file), so each lens sample shoots its own photons")
         return
-    plan.povray = dataclasses.replace(plan.povray, photon_settings=st.scene_photons)
+    plan.povray = dataclasses.replace(plan.povray,
+                                      photon_settings=shared_photon_settings(opts, st))
     plan.add_note(PHOTON_MAP_NOTE)
 
 
@@ -323,9 +345,13 @@ def shift_focal_blur_note(plan: Plan) -> str | None:
             f"--method mesh renders the shifted lens exactly")
 
 
-def make_plan_with_lens(opts: ConvertOptions) -> tuple[Plan, LensPrescription]:
-    """:func:`make_plan` and the stopped-down lens the plan was derived from."""
+def make_plan_with_lens(opts: ConvertOptions, on_start=None) -> tuple[Plan, LensPrescription]:
+    """:func:`make_plan` and the stopped-down lens the plan was derived from;
+    ``on_start(start)`` is called with the :class:`PlanStart` before the rest of the plan
+    is derived (work that needs only the scene and camera starts then)."""
     start = start_plan(opts)
+    if on_start is not None:
+        on_start(start)
     # 'povray --version' (~0.2 s, idle) runs while the pupil table is built
     plan, _ = finish_plan(opts, start, PlanReuse(version=run_in_background(povray_version)))
     return plan, start.lens

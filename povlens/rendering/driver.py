@@ -28,6 +28,7 @@ from povlens.rendering.folder_composite import composite_outdir
 from povlens.rendering.field_samples import illumination_map
 from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, mark_batches_done, render_samples
+from povlens.rendering.radiosity_cache import cancel_radiosity_cache, start_radiosity_cache_early
 from povlens.rendering.lead_render import render_led
 from povlens.rendering.running_sums import RunningSums
 from povlens.rendering.sample_stacks import recorded_bands, stack_plan
@@ -222,7 +223,10 @@ def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: boo
     With --method auto, the render auto is likely to choose starts while its depth
     probe runs (``speculate`` of :func:`povlens.plan.convert.convert`): the adaptive
     focal_blur view, or, when the lens alone rules out the views, the first lens
-    samples of the mesh render (``render_early``).  ``on_plan(plan)`` is called
+    samples of the mesh render (``render_early``).  A mesh render's shared radiosity
+    samples start as soon as the scene and camera are read (``start_radiosity``:
+    :func:`~povlens.rendering.radiosity_cache.start_radiosity_cache_early`), while the
+    rest of the plan is derived.  ``on_plan(plan)`` is called
     between conversion and rendering; ``depth_probe`` goes to ``convert`` (a focus
     pull's frames share one probe).  Returns (plan, path of image.exr).  The folder's
     lock is held throughout (:func:`povlens.plan.folder_lock.folder_lock`)."""
@@ -232,9 +236,16 @@ def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: boo
         return EarlyRender(Path(opts.outdir), plan, lens, table, POVRAY_IN_FLIGHT * jobs,
                            quiet)
 
+    def start_radiosity(opts_, start, outdir):
+        start_radiosity_cache_early(opts_, start, outdir)
+        return lambda: cancel_radiosity_cache(outdir)
+
     with folder_lock(opts.outdir):  # one writer from the conversion to the image
-        plan = convert(opts.replace(speculate=True), render_early=render_early,
-                       depth_probe=depth_probe)
-        if on_plan is not None:
-            on_plan(plan)
-        return plan, render_outdir(opts.outdir, jobs=jobs, quiet=quiet)
+        try:
+            plan = convert(opts.replace(speculate=True), render_early=render_early,
+                           depth_probe=depth_probe, start_radiosity=start_radiosity)
+            if on_plan is not None:
+                on_plan(plan)
+            return plan, render_outdir(opts.outdir, jobs=jobs, quiet=quiet)
+        finally:
+            cancel_radiosity_cache(opts.outdir)     # started early, and never needed

@@ -23,16 +23,17 @@ class PinholeProduct:
     """A pinhole render of a folder making a file for every lens sample to read, started
     by :func:`start_pinhole_product`: :meth:`wait` for the file, or :meth:`cancel`."""
 
-    def __init__(self, plan: Plan, outdir: str | os.PathLike, written: Path, final: Path,
-                 size: tuple[int, int], extra_args: list[str]):
+    def __init__(self, outdir: str | os.PathLike, written: Path, final: Path,
+                 size: tuple[int, int], extra_args: list[str], scene: str | os.PathLike,
+                 povray_options):
         folder = RenderFolder(outdir)
         self.written, self.final = written, final
         self._image = temporary_path(folder.path / f"{final.stem}-render.exr")
         try:
             self._job = start_render(
                 folder.wrapper("pinhole"), self._image, *size, threads=os.cpu_count() or 1,
-                library_paths=[Path(plan.inputs.scene).parent],
-                povray_options=povray_options_of(plan.inputs), extra_args=extra_args,
+                library_paths=[Path(scene).parent], povray_options=povray_options,
+                extra_args=extra_args,
                 products=[written])  # whole: a radiosity file ends after the image
         except BaseException:
             written.unlink(missing_ok=True)
@@ -64,7 +65,8 @@ class PinholeProduct:
 def start_pinhole_product(plan: Plan, outdir: str | os.PathLike, written: Path, final: Path,
                           size: tuple[int, int], extra_args: list[str]) -> PinholeProduct:
     """Start the render :func:`pinhole_product` waits for; returns at once."""
-    return PinholeProduct(plan, outdir, written, final, size, extra_args)
+    return PinholeProduct(outdir, written, final, size, extra_args, plan.inputs.scene,
+                          povray_options_of(plan.inputs))
 
 
 def pinhole_product(plan: Plan, outdir: str | os.PathLike, written: Path, final: Path,

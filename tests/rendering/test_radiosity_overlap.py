@@ -102,3 +102,55 @@ def test_meshes_are_written_while_the_file_is_made_and_no_run_starts_before_it(f
     assert events.index(meshes[1]) < events.index(runs[0])
     assert all(RenderFolder(out).sample_done(k) for k in range(4))
     assert _leftovers(out) == []
+
+
+def _hook(calls, out_texts):
+    def start_radiosity(opts, start, outdir):
+        out_texts.append(RenderFolder(outdir).wrapper("pinhole").read_text())
+        calls.append(start)
+        return lambda: calls.append("cancelled")
+    return start_radiosity
+
+
+def test_convert_starts_the_radiosity_render_before_the_plan_is_finished(tmp_path):
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    calls, texts = [], []
+    plan = convert(paper_options(tmp_path, scene=str(scene), focus=None),
+                   start_radiosity=_hook(calls, texts))
+    assert len(calls) == 1 and calls[0].povray_camera == plan.povray_camera
+    # the text written early is the folder's: write_folder left it as it was
+    assert texts == [RenderFolder(tmp_path / "out").wrapper("pinhole").read_text()]
+    # no radiosity, or not a mesh plan: nothing starts
+    for opts in (paper_options(tmp_path / "plain"),
+                 paper_options(tmp_path / "blur", scene=str(scene), focus=None,
+                               method="focal-blur")):
+        convert(opts, start_radiosity=_hook(calls, texts))
+    assert len(calls) == 1
+
+
+def test_a_failed_conversion_stops_what_it_started(tmp_path, monkeypatch):
+    import povlens.plan.plan_finish as plan_finish
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+
+    def failing(*a, **kw):
+        raise RuntimeError("the plan failed")
+
+    monkeypatch.setattr(plan_finish, "finish_plan", failing)
+    calls = []
+    with pytest.raises(RuntimeError, match="the plan failed"):
+        convert(paper_options(tmp_path, scene=str(scene), focus=None),
+                start_radiosity=_hook(calls, []))
+    assert calls[-1] == "cancelled"
+
+
+def test_povlens_render_leaves_only_the_whole_file(tmp_path):
+    from tests.rendering.test_radiosity_cache import SIZE, _povlens
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE)
+    _povlens("render", scene, *SIZE, "-o", tmp_path / "out")
+    out = tmp_path / "out"
+    assert RenderFolder(out).radiosity_cache.read_bytes().endswith(b"\n")
+    assert _leftovers(out) == [".povlens.lock"]
+    assert (out / "image.exr").is_file()
