@@ -166,26 +166,27 @@ def _keep_speculative_view(view: speculative.SpeculativeView, outdir: Path) -> N
     os.replace(view.out_path, RenderFolder(outdir).view_image("focal-blur"))
 
 
-def _radiosity_early(opts: ConvertOptions, out: Path, start_radiosity, cleanup):
+def _shared_early(opts: ConvertOptions, out: Path, start_shared, cleanup):
     """``on_start`` of :func:`make_plan_with_lens`: when the plan will share the
-    radiosity samples, write ``pinhole.pov`` and ``start_radiosity(opts, start, out)``
-    (stopped by ``cleanup`` if the conversion fails)."""
-    if start_radiosity is None:
+    radiosity samples or a photon map, write ``pinhole.pov`` and
+    ``start_shared(opts, start, out)`` (stopped by ``cleanup`` if the conversion
+    fails)."""
+    if start_shared is None:
         return None
 
     def on_start(start: PlanStart) -> None:
-        if not shares_radiosity(opts, start):
+        photons = shared_photon_settings(opts, start)
+        if not (photons or shares_radiosity(opts, start)):
             return
-        write_pinhole_wrapper(out, opts.scene, start.povray_camera,
-                              shared_photon_settings(opts, start))
-        cancel = start_radiosity(opts, start, out)
+        write_pinhole_wrapper(out, opts.scene, start.povray_camera, photons)
+        cancel = start_shared(opts, start, out)
         if cancel is not None:
             cleanup.callback(cancel)
     return on_start
 
 
 def convert(opts: ConvertOptions, render_early=None, depth_probe=None,
-            start_radiosity=None) -> Plan:
+            start_shared=None) -> Plan:
     """Write OUTDIR (plan.json, wrappers, Makefile) and return the plan.
 
     Parameters
@@ -212,10 +213,10 @@ def convert(opts: ConvertOptions, render_early=None, depth_probe=None,
         :func:`~povlens.plan.auto.start_depth_probe` ``(opts, film, plan)`` (default:
         that function); a focus pull's frames share one
         (:class:`povlens.plan.probe_reuse.ProbeReuse`).
-    start_radiosity : for a mesh plan sharing the radiosity samples, called as
-        ``start_radiosity(opts, start, outdir)`` once the :class:`PlanStart` is known and
+    start_shared : for a mesh plan sharing radiosity samples or a photon map, called as
+        ``start_shared(opts, start, outdir)`` once the :class:`PlanStart` is known and
         ``pinhole.pov`` written: it starts making them while the plan is finished and
-        returns what stops that if the conversion fails (:func:`_radiosity_early`).
+        returns what stops that if the conversion fails (:func:`_shared_early`).
 
     Returns
     -------
@@ -237,8 +238,7 @@ def convert(opts: ConvertOptions, render_early=None, depth_probe=None,
             choice = _choose_automatically(opts, render_early, cleanup, depth_probe)
             opts = choice.chosen
         opts, adaptive, range_info = _adaptive_sampling(opts, choice)
-        plan = (make_plan_with_lens(opts, _radiosity_early(opts, out, start_radiosity,
-                                                           cleanup))[0]
+        plan = (make_plan_with_lens(opts, _shared_early(opts, out, start_shared, cleanup))[0]
                 if choice is None else finish_plan(opts, choice.start, choice.reuse)[0])
         if adaptive is not None:
             apply_to_plan(plan, adaptive, opts.sampling.batch_size)

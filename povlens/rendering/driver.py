@@ -22,12 +22,14 @@ from tqdm import tqdm
 
 from povlens.plan.convert import ConvertOptions, convert
 from povlens.plan.folder_lock import folder_lock
+from povlens.plan.plan_finish import shared_photon_settings, shares_radiosity
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, read_plan
 from povlens.rendering.folder_composite import composite_outdir
 from povlens.rendering.field_samples import illumination_map
 from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_for
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, mark_batches_done, render_samples
+from povlens.rendering.photon_map import cancel_photon_map, start_photon_map
 from povlens.rendering.radiosity_cache import cancel_radiosity_cache, start_radiosity_cache_early
 from povlens.rendering.lead_render import render_led
 from povlens.rendering.running_sums import RunningSums
@@ -223,10 +225,9 @@ def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: boo
     With --method auto, the render auto is likely to choose starts while its depth
     probe runs (``speculate`` of :func:`povlens.plan.convert.convert`): the adaptive
     focal_blur view, or, when the lens alone rules out the views, the first lens
-    samples of the mesh render (``render_early``).  A mesh render's shared radiosity
-    samples start as soon as the scene and camera are read (``start_radiosity``:
-    :func:`~povlens.rendering.radiosity_cache.start_radiosity_cache_early`), while the
-    rest of the plan is derived.  ``on_plan(plan)`` is called
+    samples of the mesh render (``render_early``).  What a mesh render's samples share
+    (radiosity samples, a photon map) starts as soon as the scene and camera are read
+    (:func:`start_shared_early`), while the rest of the plan is derived.  ``on_plan(plan)`` is called
     between conversion and rendering; ``depth_probe`` goes to ``convert`` (a focus
     pull's frames share one probe).  Returns (plan, path of image.exr).  The folder's
     lock is held throughout (:func:`povlens.plan.folder_lock.folder_lock`)."""
@@ -236,16 +237,31 @@ def convert_and_render(opts: ConvertOptions, jobs: int | None = None, quiet: boo
         return EarlyRender(Path(opts.outdir), plan, lens, table, POVRAY_IN_FLIGHT * jobs,
                            quiet)
 
-    def start_radiosity(opts_, start, outdir):
-        start_radiosity_cache_early(opts_, start, outdir)
-        return lambda: cancel_radiosity_cache(outdir)
-
     with folder_lock(opts.outdir):  # one writer from the conversion to the image
         try:
             plan = convert(opts.replace(speculate=True), render_early=render_early,
-                           depth_probe=depth_probe, start_radiosity=start_radiosity)
+                           depth_probe=depth_probe, start_shared=start_shared_early)
             if on_plan is not None:
                 on_plan(plan)
             return plan, render_outdir(opts.outdir, jobs=jobs, quiet=quiet)
         finally:
-            cancel_radiosity_cache(opts.outdir)     # started early, and never needed
+            _cancel_shared(opts.outdir)     # started early, and never needed
+
+
+def start_shared_early(opts: ConvertOptions, start, outdir):
+    """What every lens sample of the plan of ``opts`` reads, started as soon as its
+    :class:`~povlens.plan.plan_start.PlanStart` is known (``convert``'s
+    ``start_shared``): the radiosity samples
+    (:func:`~povlens.rendering.radiosity_cache.start_radiosity_cache_early`) and the
+    photon map (:func:`~povlens.rendering.photon_map.start_photon_map`); returns what
+    stops them."""
+    if shares_radiosity(opts, start):
+        start_radiosity_cache_early(opts, start, outdir)
+    if shared_photon_settings(opts, start):
+        start_photon_map(outdir, opts.scene, start.povray)
+    return lambda: _cancel_shared(outdir)
+
+
+def _cancel_shared(outdir) -> None:
+    cancel_radiosity_cache(outdir)
+    cancel_photon_map(outdir)

@@ -54,7 +54,7 @@ from povlens.rendering.folder_inputs import exposure_for, lens_for, pupil_table_
 from povlens.rendering.pixel_sampler import pixel_sampler
 from povlens.util.files import write_text
 from povlens.util.images import write_exr
-from povlens.rendering.photon_map import photon_load_args, photon_map_for
+from povlens.rendering.photon_map import photon_load_args, photon_map_for, photon_map_ready
 from povlens.rendering.sample_stacks import (StackPlan, recorded_bands, split_stack, stack_bands,
                                              stack_plan,
                                              stack_row_args, stack_runs)
@@ -229,7 +229,7 @@ class _SampleRenders:
         self.povray_options = povray_options_of(plan.inputs)   # the user's, checked once
         # the radiosity samples of one pretrace, made before the first sample that reads
         # them; until the folder chose whether they pay, two samples measure that
-        self.photons = photon_load_args(photon_map_for(plan, outdir))    # shot once
+        self.photons: list[str] | None = None   # shot once, found when the first run starts
         self.radiosity: list[str] = []
         self.probes: dict[int, str] = {}            # sample -> "own" / "shared", running
         self.measured: dict[str, dict] = {}         # kind -> its finished measurement
@@ -317,21 +317,26 @@ class _SampleRenders:
     def start(self, k: int, stack: tuple[list[int], list[bool], int] | None = None) -> None:
         """Start the run of sample k, or of the passes ``(ks, drawn, bands)`` of one
         stack whose first is k (:mod:`povlens.rendering.sample_stacks`); while the
-        shared radiosity samples it reads are still being made, it waits in
+        shared files it reads are still being made, it waits in
         ``pending`` and this returns at once (the next sample's mesh is written
         meanwhile)."""
         while len(self.running) + len(self.pending) >= self.limit:
             self._reap(block=True)
-        if self.read_pending and (self.pending or not radiosity_cache_ready(
-                self.plan, self.folder.path)):
+        if self.pending or not self._shared_ready():
             self.pending.append((k, stack))
             return
         self._launch(k, stack)
 
+    def _shared_ready(self) -> bool:
+        """Whether the files every run reads that this process is making in the
+        background (the photon map, the shared radiosity samples) are made."""
+        return (self.photons is not None or photon_map_ready(self.plan, self.folder.path)) \
+            and (not self.read_pending or radiosity_cache_ready(self.plan, self.folder.path))
+
     def _launch_pending(self, block: bool) -> None:
-        """Start the runs waiting for the shared radiosity samples once they are made
-        (``block``: wait for them)."""
-        if self.pending and (block or radiosity_cache_ready(self.plan, self.folder.path)):
+        """Start the runs waiting for the shared files once they are made (``block``:
+        wait for them)."""
+        if self.pending and (block or self._shared_ready()):
             while self.pending:
                 self._launch(*self.pending.pop(0))
 
@@ -340,6 +345,8 @@ class _SampleRenders:
         while self.wait_first:      # an earlier run still saving the radiosity this one reads
             self.wait_first.pop().wait()
         self.stacks[k] = stack or ([k], [True], 1)
+        if self.photons is None:
+            self.photons = photon_load_args(photon_map_for(self.plan, self.folder.path))
         radiosity = self._radiosity_args(k)
         pv = self.plan.povray
         if pv.radiosity_pretrace is not None and "+RFI" in radiosity:

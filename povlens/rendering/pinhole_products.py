@@ -8,7 +8,9 @@ half a file.
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
+from typing import Callable
 
 from povlens.plan.options import povray_options_of
 from povlens.plan.render_folder import RenderFolder
@@ -16,7 +18,8 @@ from povlens.plan.schema import Plan
 from povlens.pov.process import start_render
 from povlens.util.files import temporary_path
 
-__all__ = ["pinhole_product", "start_pinhole_product", "PinholeProduct"]
+__all__ = ["pinhole_product", "start_pinhole_product", "PinholeProduct", "start_product",
+           "product_ready", "wait_product", "cancel_product", "complete"]
 
 
 class PinholeProduct:
@@ -95,3 +98,93 @@ def pinhole_product(plan: Plan, outdir: str | os.PathLike, written: Path, final:
     except BaseException:
         job.cancel()
         raise
+
+
+# -- made in the background --------------------------------------------------------------
+#
+# ``povlens render`` starts these renders as soon as the scene and camera are read, and
+# the first lens samples' meshes are written while they run; whichever thread needs the
+# file first waits for the render, the others for its result.
+
+
+class _Making:
+    """A :class:`PinholeProduct` being made, waited for by whichever thread needs it
+    first; the others get its result (or its error)."""
+
+    def __init__(self, job: PinholeProduct):
+        self.job = job
+        self.lock = threading.Lock()
+        self.result: Path | None = None
+        self.error: BaseException | None = None
+        self.done = False
+
+    def wait(self) -> Path | None:
+        with self.lock:
+            if not self.done:
+                try:
+                    self.result = self.job.wait()
+                except BaseException as e:
+                    self.error = e
+                finally:
+                    self.done = True
+        if self.error is not None:
+            raise self.error
+        return self.result
+
+
+#: Files being made in this process: their absolute path -> :class:`_Making`.
+_MAKING: dict[Path, _Making] = {}
+_MAKING_LOCK = threading.Lock()
+
+
+def complete(path: Path) -> bool:
+    """Whether a product is in place (renamed there whole)."""
+    return path.is_file() and path.stat().st_size > 0
+
+
+def start_product(final: Path, start: Callable[[], PinholeProduct]) -> None:
+    """Start making ``final`` with ``start()`` unless it is in place or being made."""
+    final = Path(final).absolute()
+    if complete(final):
+        return
+    with _MAKING_LOCK:
+        if final not in _MAKING:
+            _MAKING[final] = _Making(start())
+
+
+def product_ready(final: Path) -> bool:
+    """False while a render :func:`start_product` started for ``final`` runs; never
+    blocks."""
+    with _MAKING_LOCK:
+        making = _MAKING.get(Path(final).absolute())
+    return making is None or making.done or making.job.finished()
+
+
+def wait_product(final: Path) -> tuple[bool, Path | None]:
+    """Wait for the render :func:`start_product` started for ``final``: (True, what it
+    made: ``final`` or None), or (False, None) when none was started (or it was
+    collected already)."""
+    key = Path(final).absolute()
+    with _MAKING_LOCK:
+        making = _MAKING.get(key)
+    if making is None:
+        return False, None
+    try:
+        made = making.wait()
+    finally:
+        with _MAKING_LOCK:
+            if _MAKING.get(key) is making:
+                del _MAKING[key]
+    return True, None if made is None else Path(final)
+
+
+def cancel_product(final: Path) -> None:
+    """Stop a render :func:`start_product` started for ``final`` that nothing waited for
+    (an error, an interrupt, a render that did not need it)."""
+    with _MAKING_LOCK:
+        making = _MAKING.pop(Path(final).absolute(), None)
+    if making is not None:
+        with making.lock:
+            if not making.done:
+                making.done = True
+                making.job.cancel()

@@ -47,14 +47,15 @@ from __future__ import annotations
 
 import json
 import os
-import threading
 from pathlib import Path
 
 from povlens.plan.options import povray_options_of
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.pov.render_statistics import render_statistics
-from povlens.rendering.pinhole_products import PinholeProduct, pinhole_product
+from povlens.rendering.pinhole_products import (PinholeProduct, cancel_product, complete,
+                                                pinhole_product, product_ready, start_product,
+                                                wait_product)
 from povlens.util.files import temporary_path, write_text
 
 __all__ = ["radiosity_cache_for", "start_radiosity_cache", "start_radiosity_cache_early",
@@ -67,46 +68,11 @@ __all__ = ["radiosity_cache_for", "start_radiosity_cache", "start_radiosity_cach
 PROBES = ("own", "shared")
 
 
-class _Making:
-    """The pinhole render making a folder's radiosity samples, waited for by whichever
-    thread needs them first; the others get its result (or its error)."""
-
-    def __init__(self, job: PinholeProduct):
-        self.job = job
-        self.lock = threading.Lock()
-        self.result: Path | None = None
-        self.error: BaseException | None = None
-        self.done = False
-
-    def wait(self) -> Path | None:
-        with self.lock:
-            if not self.done:
-                try:
-                    self.result = self.job.wait()
-                except BaseException as e:
-                    self.error = e
-                    self.job.cancel()
-                finally:
-                    self.done = True
-        if self.error is not None:
-            raise self.error
-        return self.result
-
-
-#: Radiosity files being made in this process: their path -> :class:`_Making`.
-_MAKING: dict[Path, _Making] = {}
-_MAKING_LOCK = threading.Lock()
-
-
 def _shared_file(plan: Plan, outdir) -> Path | None:
     """The folder's radiosity file if the plan shares one, else None."""
     if not plan.povray.radiosity_cache or sharing_chosen(outdir) is False:
         return None
     return RenderFolder(outdir).radiosity_cache.absolute()
-
-
-def _complete(cache: Path) -> bool:
-    return cache.is_file() and cache.stat().st_size > 0
 
 
 def start_radiosity_cache(plan: Plan, outdir: str | os.PathLike) -> None:
@@ -138,14 +104,12 @@ def start_radiosity_cache_early(opts, start, outdir: str | os.PathLike) -> None:
 
 def _start(cache: Path, outdir, size: tuple[int, int], scene, povray_options) -> None:
     """Start the pinhole render making ``cache`` unless it is complete or being made."""
-    if _complete(cache):
-        return
-    with _MAKING_LOCK:
-        if cache not in _MAKING:
-            tmp = temporary_path(cache)
-            _MAKING[cache] = _Making(PinholeProduct(
-                outdir, tmp, cache, size, [f"Radiosity_File_Name={tmp.name}", "+RFO"], scene,
-                povray_options))
+    def start():
+        tmp = temporary_path(cache)
+        return PinholeProduct(outdir, tmp, cache, size,
+                              [f"Radiosity_File_Name={tmp.name}", "+RFO"], scene,
+                              povray_options)
+    start_product(cache, start)
 
 
 def radiosity_cache_ready(plan: Plan, outdir: str | os.PathLike) -> bool:
@@ -153,23 +117,14 @@ def radiosity_cache_ready(plan: Plan, outdir: str | os.PathLike) -> bool:
     samples runs; True otherwise (:func:`radiosity_cache_for` then returns without
     waiting for a render this process started).  Never blocks."""
     cache = _shared_file(plan, outdir)
-    with _MAKING_LOCK:
-        making = _MAKING.get(cache) if cache is not None else None
-    return making is None or making.done or making.job.finished()
+    return cache is None or product_ready(cache)
 
 
 def cancel_radiosity_cache(outdir: str | os.PathLike) -> None:
     """Stop a render of the folder's radiosity samples that
     :func:`start_radiosity_cache` started and nothing waited for (an error, an
-    interrupt)."""
-    cache = RenderFolder(outdir).radiosity_cache.absolute()
-    with _MAKING_LOCK:
-        making = _MAKING.pop(cache, None)
-    if making is not None:
-        with making.lock:
-            if not making.done:
-                making.done = True
-                making.job.cancel()
+    interrupt, a render that did not need them)."""
+    cancel_product(RenderFolder(outdir).radiosity_cache)
 
 
 def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
@@ -194,17 +149,10 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     cache = _shared_file(plan, outdir)
     if cache is None:
         return None
-    with _MAKING_LOCK:
-        making = _MAKING.get(cache)
-    if making is not None:
-        try:
-            made = making.wait()
-        finally:
-            with _MAKING_LOCK:
-                if _MAKING.get(cache) is making:
-                    del _MAKING[cache]
+    started, made = wait_product(cache)
+    if started:
         return None if made is None else RenderFolder(outdir).radiosity_cache
-    if _complete(cache):
+    if complete(cache):
         return RenderFolder(outdir).radiosity_cache
     tmp = temporary_path(cache)
     return pinhole_product(plan, outdir, tmp, cache, (plan.film.width_px, plan.film.height_px),

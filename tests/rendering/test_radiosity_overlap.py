@@ -117,7 +117,7 @@ def test_convert_starts_the_radiosity_render_before_the_plan_is_finished(tmp_pat
     scene.write_text(RADIOSITY_SCENE)
     calls, texts = [], []
     plan = convert(paper_options(tmp_path, scene=str(scene), focus=None),
-                   start_radiosity=_hook(calls, texts))
+                   start_shared=_hook(calls, texts))
     assert len(calls) == 1 and calls[0].povray_camera == plan.povray_camera
     # the text written early is the folder's: write_folder left it as it was
     assert texts == [RenderFolder(tmp_path / "out").wrapper("pinhole").read_text()]
@@ -125,7 +125,7 @@ def test_convert_starts_the_radiosity_render_before_the_plan_is_finished(tmp_pat
     for opts in (paper_options(tmp_path / "plain"),
                  paper_options(tmp_path / "blur", scene=str(scene), focus=None,
                                method="focal-blur")):
-        convert(opts, start_radiosity=_hook(calls, texts))
+        convert(opts, start_shared=_hook(calls, texts))
     assert len(calls) == 1
 
 
@@ -141,7 +141,7 @@ def test_a_failed_conversion_stops_what_it_started(tmp_path, monkeypatch):
     calls = []
     with pytest.raises(RuntimeError, match="the plan failed"):
         convert(paper_options(tmp_path, scene=str(scene), focus=None),
-                start_radiosity=_hook(calls, []))
+                start_shared=_hook(calls, []))
     assert calls[-1] == "cancelled"
 
 
@@ -154,3 +154,23 @@ def test_povlens_render_leaves_only_the_whole_file(tmp_path):
     assert RenderFolder(out).radiosity_cache.read_bytes().endswith(b"\n")
     assert _leftovers(out) == [".povlens.lock"]
     assert (out / "image.exr").is_file()
+
+
+def test_the_photon_map_starts_early_too_and_the_samples_wait_for_it(tmp_path):
+    from tests.rendering.test_photon_map import PHOTON_SCENE
+    from povlens.rendering.driver import start_shared_early
+    from povlens.rendering.photon_map import photon_map_for, photon_map_ready
+    scene = tmp_path / "p.pov"
+    scene.write_text(PHOTON_SCENE)
+    calls, texts = [], []
+    hook = _hook(calls, texts)
+    plan = convert(paper_options(tmp_path, scene=str(scene), focus=None),
+                   start_shared=lambda o, s, d: (hook(o, s, d), start_shared_early(o, s, d))[1])
+    out = tmp_path / "out"
+    assert len(calls) == 1 and plan.povray.photon_settings
+    assert "save_file" in texts[0] and texts[0] == RenderFolder(out).wrapper("pinhole").read_text()
+    assert not photon_map_ready(plan, out)           # started, still shooting
+    assert photon_map_for(plan, out) == RenderFolder(out).photon_map
+    assert RenderFolder(out).photon_map.stat().st_size > 0
+    assert photon_map_ready(plan, out)
+    assert _leftovers(out) == []
