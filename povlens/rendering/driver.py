@@ -110,20 +110,20 @@ def _render_locked(outdir: Path, jobs: int | None, quiet: bool,
 def _render_mesh_samples(plan: Plan, lens, table, outdir: Path, todo: list[int], samples,
                          jobs: int, in_flight: int, on_done) -> dict:
     """Render the lens samples ``todo`` of ``povlens render`` (``samples(ks)`` yields
-    them); returns the timing record.  A plan whose samples stack and share radiosity,
-    in a folder that holds none of them yet (a folder with some, rendered early by
-    ``--method auto``, by ``make`` or before the layout was recorded, keeps the layout
-    they have), lets its first sample choose between stacks and one run each
-    (:func:`povlens.rendering.lead_render.render_led`).  Other
-    plans stack: a scene without radiosity has only its parse and start-up to share
-    (photon maps are shared either way: :mod:`povlens.rendering.photon_map`), and
-    measured on the stock scenes with photons only, the two ways are within 6 % of each
-    other (``benchmarks/results/stock_heavy_320x240_n8_eye``: glassthing 1.49x both,
-    optics 1.25 against 1.32, phot_met_glass 1.77 against 1.62); their images then
-    stay the same bits whichever way a folder renders (``make``, a cluster)."""
+    them); returns the timing record.  A plan whose samples stack and share radiosity
+    or a photon map, in a folder that holds none of them yet (a folder with some,
+    rendered early by ``--method auto``, by ``make`` or before the layout was recorded,
+    keeps the layout they have), lets its first sample choose between stacks and one
+    run each (:func:`povlens.rendering.lead_render.render_led`).  Other plans stack:
+    a scene with neither has only its parse and start-up to share.  Scenes with photons
+    only stacked too until the 640x480 sweep: ``lights/phot_met_glass.pov`` at 640x480,
+    8 samples, took 24.8 s stacked and 14.7 s one run each (focal_blur 10.3 s), its
+    parse too small to pay for a stack's face lookup, where at 320x240 the two ways were
+    within 10 % (``benchmarks/results/stock_heavy_*_early.txt``)."""
     stacking = stack_plan(plan, todo, jobs, chain=True, outdir=outdir)
     if (stacking.bands == 1 or len(todo) < plan.inputs.samples or len(todo) < 2
-            or not plan.povray.radiosity_cache or os.environ.get("POVLENS_STACK")
+            or not (plan.povray.radiosity_cache or plan.povray.photon_settings)
+            or os.environ.get("POVLENS_STACK")
             or recorded_bands(outdir) is not None):
         return render_samples(plan, lens, table, outdir, 0, samples(todo), in_flight=in_flight,
                               on_done=on_done, stacking=stacking,

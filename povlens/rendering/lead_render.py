@@ -1,5 +1,7 @@
 """The lens samples of ``povlens render`` led by the first: it renders alone and chooses
-how the rest run (:mod:`povlens.rendering.run_choice`).
+how the rest run (:mod:`povlens.rendering.run_choice`).  Plans that share radiosity
+samples or a photon map are led; a scene with photons only has its parse to share, and
+no radiosity to hand on.
 
 :func:`render_led` renders sample ``todo[0]`` (the *lead*) as a pass of its own on
 every core, with POV-Ray's statistics.  First, one pinhole render of the frame saves
