@@ -15,7 +15,11 @@ The plan says whether a render shares them (``plan.povray.radiosity_cache``, set
 mesh plan of a scene whose ``global_settings`` hold ``radiosity``). The file is made by
 the first render that needs it (``povlens render``, each batch of ``make``, each
 worker's copy of a cluster render) and renamed into place when complete, so renders
-racing to make it waste time, never read half a file.
+racing to make it waste time, never read half a file.  ``povlens render`` starts that
+render as soon as it has read the scene and camera (:func:`start_radiosity_cache_early`),
+and its lens samples' meshes are written while it runs; a run that reads the file waits
+for it (:mod:`povlens.rendering.pinhole_products`: raddem.pov at 320x240, 8 samples,
+3.07 s -> 2.2-2.4 s).
 
 ``povlens render`` reads them in every run (:mod:`povlens.rendering.lead_render`): a
 field pass's own pretrace is spaced by the tiled image it renders, and either leaves
