@@ -44,7 +44,7 @@ from povlens.util.threads import run_in_background
 
 __all__ = ["PlanReuse", "finish_plan", "make_plan", "make_plan_with_lens",
            "check_shift_sees_light", "shift_focal_blur_note", "MESH_ANTIALIAS_NOTE",
-           "PINHOLE_NOTE", "shares_radiosity", "shared_photon_settings"]
+           "PINHOLE_NOTE", "shares_radiosity", "shared_photon_settings", "no_pretrace"]
 
 #: The note of a pinhole plan, which skips what only the lens's blur needs
 #: (:func:`finish_plan`): ``model_error`` is empty, and the plan builds no exit-pupil
@@ -254,7 +254,26 @@ def _radiosity_cache(opts: ConvertOptions, plan: Plan, st: PlanStart) -> None:
                       "sample computes its own radiosity samples")
         return
     plan.povray = dataclasses.replace(plan.povray, radiosity_cache=True)
-    plan.add_note(RADIOSITY_CACHE_NOTE)
+    plan.add_note(NO_PRETRACE_NOTE if no_pretrace(st.scene_pretrace) else RADIOSITY_CACHE_NOTE)
+
+
+#: What a mesh plan of a scene whose radiosity has no pretrace says instead.
+NO_PRETRACE_NOTE = (
+    "radiosity: the scene has no pretrace (pretrace_end 1), so a pinhole render of the frame "
+    "would save only the samples its final trace computes, where the lens samples' rays, "
+    "elsewhere, mostly compute their own (stackernight.pov: its first lens sample shot as "
+    "many radiosity rays reading them as without); the first lens sample computes its own "
+    "and the runs after it read and extend them in turn; the scene's radiosity settings are "
+    "kept")
+
+
+def no_pretrace(pretrace: tuple[float, float] | None) -> bool:
+    """Whether a scene's radiosity pretrace ``(pretrace_start, pretrace_end)`` (None:
+    unknown) does nothing: its finest pass spans the whole image (``pretrace_end 1``).
+    Then one pinhole render's radiosity samples are those its final trace computed, at
+    the frame's pixels, and serve lens samples little (module
+    :mod:`povlens.rendering.radiosity_cache`)."""
+    return pretrace is not None and float(pretrace[1]) >= 1.0
 
 
 def _names_radiosity_file(st: PlanStart) -> bool:

@@ -37,6 +37,7 @@ import numpy as np
 from povlens.errors import PovlensError
 from povlens.plan.folder_lock import batch_lock, folder_lock
 from povlens.plan.options import povray_options_of
+from povlens.plan.plan_finish import no_pretrace
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan, PovraySettings, read_plan
 from povlens.pov.executable import find_povray
@@ -241,7 +242,8 @@ class _SampleRenders:
         # nothing to choose for one run of every sample left or a chain (one pretrace
         # serves them all), nor where the caller has chosen to read the shared samples
         self.choosing = (plan.povray.radiosity_cache and chosen is None and not one_run
-                         and not chained and not read_shared)
+                         and not chained and not read_shared
+                         and not no_pretrace(plan.povray.radiosity_pretrace))
         self.read_shared = read_shared
         if chained and not keep_chain:
             self.folder.radiosity_chain.unlink(missing_ok=True)     # an earlier render's

@@ -54,6 +54,7 @@ import os
 from pathlib import Path
 
 from povlens.plan.options import povray_options_of
+from povlens.plan.plan_finish import no_pretrace
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.pov.render_statistics import render_statistics
@@ -73,8 +74,10 @@ PROBES = ("own", "shared")
 
 
 def _shared_file(plan: Plan, outdir) -> Path | None:
-    """The folder's radiosity file if the plan shares one, else None."""
-    if not plan.povray.radiosity_cache or sharing_chosen(outdir) is False:
+    """The folder's radiosity file if the plan shares one, else None (also for a scene
+    without a pretrace: :func:`povlens.plan.plan_finish.no_pretrace`)."""
+    if (not plan.povray.radiosity_cache or sharing_chosen(outdir) is False
+            or no_pretrace(plan.povray.radiosity_pretrace)):
         return None
     return RenderFolder(outdir).radiosity_cache.absolute()
 
@@ -100,7 +103,7 @@ def start_radiosity_cache_early(opts, start, outdir: str | os.PathLike) -> None:
     folder's ``pinhole.pov`` is written): the pupil table and the field meshes are
     derived meanwhile (``raddem.pov`` at 320x240: 0.4 s).  Nothing starts when the
     folder has the file, or chose not to share it."""
-    if sharing_chosen(outdir) is False:
+    if sharing_chosen(outdir) is False or no_pretrace(start.scene_pretrace):
         return
     _start(RenderFolder(outdir).radiosity_cache.absolute(), outdir,
            (start.film.width_px, start.film.height_px), opts.scene, start.povray)
