@@ -174,3 +174,31 @@ def test_the_photon_map_starts_early_too_and_the_samples_wait_for_it(tmp_path):
     assert RenderFolder(out).photon_map.stat().st_size > 0
     assert photon_map_ready(plan, out)
     assert _leftovers(out) == []
+
+
+def test_a_scene_without_a_pretrace_makes_no_pinhole_render(tmp_path):
+    """pretrace_end 1: one pinhole render's samples would be those its final trace
+    computed (stackernight.pov's lead shot as many radiosity rays reading them as
+    without), so none is made; the lead computes its own and hands them on, and the
+    image is the one of one run per sample within radiosity's noise."""
+    import json
+    from povlens.plan.plan_finish import no_pretrace
+    from tests.rendering.test_radiosity_cache import (ONE_PER_RUN, SIZE, _povlens,
+                                                      assert_same_within_radiosity_noise)
+    assert no_pretrace((1.0, 1.0)) and not no_pretrace((0.08, 0.04)) and not no_pretrace(None)
+    scene = tmp_path / "rad.pov"
+    scene.write_text(RADIOSITY_SCENE.replace("pretrace_start 0.08 pretrace_end 0.02",
+                                             "pretrace_start 1 pretrace_end 1"))
+    _povlens("render", scene, *SIZE, "-o", tmp_path / "led")
+    led = tmp_path / "led"
+    plan = json.loads((led / "plan.json").read_text())
+    assert plan["povray"]["radiosity_cache"] is True
+    assert plan["povray"]["radiosity_pretrace"] == [1.0, 1.0]
+    assert any(n.startswith("radiosity: the scene has no pretrace") for n in plan["notes"])
+    assert not RenderFolder(led).radiosity_cache.exists()
+    timing = json.loads((led / "samples" / "render.timing.json").read_text())
+    assert timing["lead"]["samples"] == 1 and timing["samples"] == 4
+    assert _leftovers(led) == [".povlens.lock"]
+    _povlens("render", scene, *SIZE, "--povray-option", "Radiosity_File_Name=own.rca",
+             "-o", tmp_path / "own", env=ONE_PER_RUN)
+    assert_same_within_radiosity_noise(tmp_path / "own", led)
