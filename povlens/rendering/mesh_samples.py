@@ -253,6 +253,7 @@ class _SampleRenders:
             chosen is not None or not one_run or read_shared)
         # runs whose meshes are written, started once that render is done: (k, stack)
         self.pending: list[tuple[int, tuple | None]] = []
+        self.shared_made = False
 
     def _radiosity_args(self, k: int) -> list[str]:
         """Sample k's radiosity switches; while choosing, a probe's (module doc of
@@ -331,9 +332,12 @@ class _SampleRenders:
 
     def _shared_ready(self) -> bool:
         """Whether the files every run reads that this process is making in the
-        background (the photon map, the shared radiosity samples) are made."""
-        return (self.photons is not None or photon_map_ready(self.plan, self.folder.path)) \
-            and (not self.read_pending or radiosity_cache_ready(self.plan, self.folder.path))
+        background (the photon map, the shared radiosity samples) are made; once they
+        are, it is not asked again (each asking reads the folder's radiosity choice)."""
+        self.shared_made = self.shared_made or (
+            (self.photons is not None or photon_map_ready(self.plan, self.folder.path))
+            and (not self.read_pending or radiosity_cache_ready(self.plan, self.folder.path)))
+        return self.shared_made
 
     def _launch_pending(self, block: bool) -> None:
         """Start the runs waiting for the shared files once they are made (``block``:

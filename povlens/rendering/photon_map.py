@@ -28,8 +28,8 @@ from pathlib import Path
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.plan.options import povray_options_of
-from povlens.rendering.pinhole_products import (PinholeProduct, cancel_product, complete,
-                                                product_ready, start_product, wait_product)
+from povlens.rendering.pinhole_products import (PinholeProduct, cancel_product, product_ready,
+                                                start_product, wait_product)
 
 __all__ = ["photon_map_for", "photon_load_args", "start_photon_map", "photon_map_ready",
            "cancel_photon_map", "MAP_RENDER_SIZE"]
@@ -56,18 +56,8 @@ def photon_map_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     """
     if not plan.povray.photon_settings:
         return None
-    photon_map = RenderFolder(outdir).photon_map
-    started, made = wait_product(photon_map)
-    if started:
-        return made
-    if complete(photon_map):
-        return photon_map
-    job = _start(outdir, plan.inputs.scene, povray_options_of(plan.inputs))
-    try:
-        return job.wait()
-    except BaseException:
-        job.cancel()
-        raise
+    start_photon_map(outdir, plan.inputs.scene, povray_options_of(plan.inputs))
+    return wait_product(RenderFolder(outdir).photon_map)
 
 
 def _start(outdir, scene, povray_options) -> PinholeProduct:
@@ -82,7 +72,8 @@ def _start(outdir, scene, povray_options) -> PinholeProduct:
 
 def start_photon_map(outdir: str | os.PathLike, scene: str, povray_options) -> None:
     """Start shooting the folder's photons (its ``pinhole.pov`` written with the photons
-    block that saves them) and return at once: :func:`photon_map_for` waits for it,
+    block that saves them) unless the map is in place or being shot, and return at
+    once: :func:`photon_map_for` waits for it,
     :func:`photon_map_ready` says whether it is done, :func:`cancel_photon_map` stops
     it.  ``povlens render`` starts it as soon as the scene and camera are read
     (``lights/glassthing.pov``: 0.6 s, while the plan and the first meshes take 1 s)."""

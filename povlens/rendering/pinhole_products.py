@@ -12,19 +12,21 @@ import threading
 from pathlib import Path
 from typing import Callable
 
-from povlens.plan.options import povray_options_of
 from povlens.plan.render_folder import RenderFolder
-from povlens.plan.schema import Plan
 from povlens.pov.process import start_render
 from povlens.util.files import temporary_path
 
-__all__ = ["pinhole_product", "start_pinhole_product", "PinholeProduct", "start_product",
-           "product_ready", "wait_product", "cancel_product", "complete"]
+__all__ = ["PinholeProduct", "start_product", "product_ready", "wait_product",
+           "cancel_product", "complete"]
 
 
 class PinholeProduct:
-    """A pinhole render of a folder making a file for every lens sample to read, started
-    by :func:`start_pinhole_product`: :meth:`wait` for the file, or :meth:`cancel`."""
+    """A pinhole render of a folder making a file for every lens sample to read (the
+    image is thrown away), started at once: :meth:`wait` for the file (renamed to
+    ``final`` when whole), or :meth:`cancel`.  ``written`` is where POV-Ray writes it,
+    a name of this render's own, so renders racing to make it never read half a file;
+    ``size`` (width, height) pixels; ``extra_args`` the switches that make it write
+    ``written``."""
 
     def __init__(self, outdir: str | os.PathLike, written: Path, final: Path,
                  size: tuple[int, int], extra_args: list[str], scene: str | os.PathLike,
@@ -63,41 +65,6 @@ class PinholeProduct:
         self._job.cancel()
         self.written.unlink(missing_ok=True)
         self._image.unlink(missing_ok=True)
-
-
-def start_pinhole_product(plan: Plan, outdir: str | os.PathLike, written: Path, final: Path,
-                          size: tuple[int, int], extra_args: list[str]) -> PinholeProduct:
-    """Start the render :func:`pinhole_product` waits for; returns at once."""
-    return PinholeProduct(outdir, written, final, size, extra_args, plan.inputs.scene,
-                          povray_options_of(plan.inputs))
-
-
-def pinhole_product(plan: Plan, outdir: str | os.PathLike, written: Path, final: Path,
-                    size: tuple[int, int], extra_args: list[str]) -> Path | None:
-    """A file a pinhole render of the folder writes beside its image (the radiosity
-    samples, the photon map), renamed to ``final`` when complete; the image is thrown
-    away.
-
-    Parameters
-    ----------
-    plan, outdir : the folder's plan and the folder.
-    written : where POV-Ray writes the file (a name of this render's own, so renders
-        racing to make it never read half a file); removed afterwards.
-    final : its name once complete.
-    size : (width, height) of the render, pixels.
-    extra_args : the POV-Ray switches that make it write ``written``.
-
-    Returns
-    -------
-    Path or None
-        ``final``, None if POV-Ray wrote nothing.
-    """
-    job = start_pinhole_product(plan, outdir, written, final, size, extra_args)
-    try:
-        return job.wait()
-    except BaseException:
-        job.cancel()
-        raise
 
 
 # -- made in the background --------------------------------------------------------------
@@ -160,22 +127,20 @@ def product_ready(final: Path) -> bool:
     return making is None or making.done or making.job.finished()
 
 
-def wait_product(final: Path) -> tuple[bool, Path | None]:
-    """Wait for the render :func:`start_product` started for ``final``: (True, what it
-    made: ``final`` or None), or (False, None) when none was started (or it was
-    collected already)."""
+def wait_product(final: Path) -> Path | None:
+    """``final`` once whole, after waiting for the render :func:`start_product` started
+    for it (raising what that render raised); None if it is not in place."""
     key = Path(final).absolute()
     with _MAKING_LOCK:
         making = _MAKING.get(key)
-    if making is None:
-        return False, None
-    try:
-        made = making.wait()
-    finally:
-        with _MAKING_LOCK:
-            if _MAKING.get(key) is making:
-                del _MAKING[key]
-    return True, None if made is None else Path(final)
+    if making is not None:
+        try:
+            making.wait()
+        finally:
+            with _MAKING_LOCK:
+                if _MAKING.get(key) is making:
+                    del _MAKING[key]
+    return Path(final) if complete(Path(final)) else None
 
 
 def cancel_product(final: Path) -> None:

@@ -58,9 +58,8 @@ from povlens.plan.plan_finish import no_pretrace
 from povlens.plan.render_folder import RenderFolder
 from povlens.plan.schema import Plan
 from povlens.pov.render_statistics import render_statistics
-from povlens.rendering.pinhole_products import (PinholeProduct, cancel_product, complete,
-                                                pinhole_product, product_ready, start_product,
-                                                wait_product)
+from povlens.rendering.pinhole_products import (PinholeProduct, cancel_product, product_ready,
+                                                start_product, wait_product)
 from povlens.util.files import temporary_path, write_text
 
 __all__ = ["radiosity_cache_for", "start_radiosity_cache", "start_radiosity_cache_early",
@@ -148,22 +147,15 @@ def radiosity_cache_for(plan: Plan, outdir: str | os.PathLike) -> Path | None:
     Path or None
         ``RenderFolder(outdir).radiosity_cache``; made by one pinhole render of the
         folder's ``pinhole.pov`` at the image's size, all cores
-        (:func:`povlens.rendering.pinhole_products.pinhole_product`), or by the one
+        (:class:`povlens.rendering.pinhole_products.PinholeProduct`), or by the one
         :func:`start_radiosity_cache` started, waited for.
         None also when the folder's first lens sample found that sharing does not pay
         (:func:`sharing_chosen`).
     """
-    cache = _shared_file(plan, outdir)
-    if cache is None:
+    if _shared_file(plan, outdir) is None:
         return None
-    started, made = wait_product(cache)
-    if started:
-        return None if made is None else RenderFolder(outdir).radiosity_cache
-    if complete(cache):
-        return RenderFolder(outdir).radiosity_cache
-    tmp = temporary_path(cache)
-    return pinhole_product(plan, outdir, tmp, cache, (plan.film.width_px, plan.film.height_px),
-                           [f"Radiosity_File_Name={tmp.name}", "+RFO"])
+    start_radiosity_cache(plan, outdir)     # unless in place or being made
+    return wait_product(RenderFolder(outdir).radiosity_cache)
 
 
 def radiosity_read_args(cache: Path | None, cwd: Path) -> list[str]:
