@@ -2,8 +2,8 @@
 what the lens samples share (issue 25).
 
     python3 benchmarks/stock_heavy.py [--sizes 320x240,640x480] [--samples 8,32]
-        [--lens tessar.50mm] [--limit-s 60] [--only NAME ...] [--list]
-        [--out benchmarks/results/stock_heavy]
+        [--lens tessar.50mm] [--limit-s 60] [--only NAME ...] [--skip NAME ...]
+        [--timing-only] [--list] [--out benchmarks/results/stock_heavy]
 
 Finds Debian's povray-examples scenes whose ``global_settings`` hold ``radiosity`` or
 ``photons`` (povlens's scene reader), keeps those POV-Ray renders through their own
@@ -15,7 +15,9 @@ own radiosity (``POVLENS_STACK=1``, ``--povray-option Radiosity_File_Name=...``,
 uncached way; photons stay shared: their map gives the per-sample image exactly). It
 reports the ratio mesh / focal_blur, how the default render ran its samples (``runs``:
 one stack or one run each, as its first sample chose), and RMSE and FLIP of the shared render against the
-uncached one. One heavy job at a time: run it alone on the machine. Writes
+uncached one. ``--timing-only`` leaves the uncached render out (and with it the image
+check): on balcony.pov it costs 7 times the focal_blur render, so the larger sizes are
+timed without it. One heavy job at a time: run it alone on the machine. Writes
 ``OUT.csv`` and ``OUT.txt``.
 """
 
@@ -82,18 +84,23 @@ def _render(scene: Path, out: Path, method: str, n: int, size, lens: str, extra=
     return _timed(cmd, scene.parent, 3600, env)
 
 
-def measure(scene: Path, uses: str, size, n: int, lens: str, work: Path) -> dict:
-    """One row: the three renders' times, the ratios and the shared render's error."""
+def measure(scene: Path, uses: str, size, n: int, lens: str, work: Path,
+            timing_only: bool = False) -> dict:
+    """One row: the three renders' times, the ratios and the shared render's error
+    (``timing_only``: the first two renders and their ratio)."""
     row = {"scene": str(scene.relative_to(EXAMPLES)), "uses": uses,
            "size": f"{size[0]}x{size[1]}", "samples": n}
-    for key, method, extra in (("focal_blur_s", "focal-blur", ()), ("mesh_s", "mesh", ()),
-                               ("mesh_uncached_s", "mesh", UNCACHED)):
+    renders = (("focal_blur_s", "focal-blur", ()), ("mesh_s", "mesh", ()),
+               ("mesh_uncached_s", "mesh", UNCACHED))
+    for key, method, extra in renders[:2] if timing_only else renders:
         t, err = _render(scene, work / key, method, n, size, lens, extra)
         row[key] = "" if t is None else round(t, 2)
         if err:
             row["error"] = err
     row["runs"] = _runs_chosen(work / "mesh_s")
-    if row["focal_blur_s"] and row["mesh_s"] and row["mesh_uncached_s"]:
+    if timing_only and row["focal_blur_s"] and row["mesh_s"]:
+        row["ratio"] = round(row["mesh_s"] / row["focal_blur_s"], 3)
+    elif row["focal_blur_s"] and row["mesh_s"] and row["mesh_uncached_s"]:
         row["ratio"] = round(row["mesh_s"] / row["focal_blur_s"], 3)
         row["ratio_uncached"] = round(row["mesh_uncached_s"] / row["focal_blur_s"], 3)
         a = read_image(work / "mesh_uncached_s" / "image.exr")[..., :3]
@@ -121,6 +128,9 @@ def main(argv=None) -> int:
     ap.add_argument("--lens", default="tessar.50mm")
     ap.add_argument("--limit-s", type=float, default=60.0)
     ap.add_argument("--only", nargs="*", default=None, help="scene file names to keep")
+    ap.add_argument("--skip", nargs="*", default=(), help="scene file names to leave out")
+    ap.add_argument("--timing-only", action="store_true",
+                    help="time focal_blur and the default mesh render only")
     ap.add_argument("--list", action="store_true", help="list the scenes and stop")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "stock_heavy")
     args = ap.parse_args(argv)
@@ -129,6 +139,7 @@ def main(argv=None) -> int:
     scenes = heavy_scenes(*sizes[0])
     if args.only:
         scenes = [(s, u) for s, u in scenes if s.name in args.only]
+    scenes = [(s, u) for s, u in scenes if s.name not in args.skip]
     if args.list:
         for s, u in scenes:
             print(f"{s.relative_to(EXAMPLES)}  {u}")
@@ -146,7 +157,7 @@ def main(argv=None) -> int:
                 for n in counts:
                     sub = work / f"{size[0]}x{size[1]}-{n}"
                     sub.mkdir()
-                    row = measure(scene, uses, size, n, args.lens, sub)
+                    row = measure(scene, uses, size, n, args.lens, sub, args.timing_only)
                     row["own_camera_s"] = round(own, 2)
                     rows.append(row)
                     print(row, flush=True)
