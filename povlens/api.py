@@ -24,6 +24,7 @@ from povlens.plan.focus_series import FocusPull, focus_series, parse_focus
 from povlens.plan.options import SCHEDULER_ENV_VAR, ConvertOptions, DaskOptions
 from povlens.plan.render_folder import FramesFolder, RenderFolder
 from povlens.plan.schema import Plan
+from povlens.util.blas import single_threaded_blas
 
 __all__ = ["read_lens", "focus", "convert", "render", "composite", "compare", "RenderResult",
            "import_lens", "render_frames", "FramesResult", "convert_frames", "focus_distances",
@@ -117,6 +118,7 @@ def focus_distances(focus, frames: int | None = None) -> list[float] | None:
     return focus_series(spec, frames)
 
 
+@single_threaded_blas
 def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | os.PathLike,
             focus: float | str | None = None, **options) -> Plan:
     """Write a render folder for ``scene`` through ``lens`` (no rendering).
@@ -160,6 +162,7 @@ def convert(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | 
         return convert_options(opts)
 
 
+@single_threaded_blas
 def convert_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
                    outdir: str | os.PathLike, focus, frames: int | None = None,
                    **options) -> "FramesResult":
@@ -225,6 +228,7 @@ class RenderResult:
     image_png: Path
 
 
+@single_threaded_blas
 def render(scene: str | os.PathLike, *, lens: str | os.PathLike, outdir: str | os.PathLike,
            focus: float | str | None = None, progress: bool = False,
            on_plan: Callable[[Plan], None] | None = None, renderer=None,
@@ -305,6 +309,7 @@ def _pull(focus, frames) -> list[float]:
     return values
 
 
+@single_threaded_blas
 def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
                   outdir: str | os.PathLike, focus, frames: int | None = None,
                   progress: bool = False, on_plan: Callable[[Plan], None] | None = None,
@@ -346,6 +351,7 @@ def render_frames(scene: str | os.PathLike, *, lens: str | os.PathLike,
     return FramesResult.of(outdir, records)
 
 
+@single_threaded_blas
 def render_batch(outdir: str | os.PathLike, batch: int, in_flight: int | None = None) -> None:
     """Render batch ``batch`` of a converted folder's lens samples (what ``make`` runs).
 
@@ -356,6 +362,7 @@ def render_batch(outdir: str | os.PathLike, batch: int, in_flight: int | None = 
     render_folder_batch(outdir, batch, in_flight=in_flight or POVRAY_IN_FLIGHT)
 
 
+@single_threaded_blas
 def render_view(outdir: str | os.PathLike, view: str) -> Path:
     """Render the ``"pinhole"`` or ``"focal-blur"`` view of a converted folder (what
     ``make`` runs); returns its image's path."""
@@ -364,6 +371,7 @@ def render_view(outdir: str | os.PathLike, view: str) -> Path:
         return render_folder_view(outdir, view)
 
 
+@single_threaded_blas
 def composite(outdir: str | os.PathLike, vignetting: bool | None = None) -> np.ndarray:
     """Combine a render folder's lens samples into ``image.exr`` and ``image.png``.
 

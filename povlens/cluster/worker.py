@@ -36,6 +36,7 @@ from povlens.rendering.folder_inputs import lens_for, pupil_table_for
 from povlens.rendering.groups import GroupSums, pack_group
 from povlens.rendering.mesh_samples import POVRAY_IN_FLIGHT, render_samples
 from povlens.rendering.sample_stacks import stack_plan
+from povlens.util.blas import single_threaded_blas
 
 __all__ = ["render_sample", "render_group", "forget_render", "forget_render_async"]
 
@@ -137,6 +138,7 @@ def _render(job: dict, outdir: Path, ks: list[int], group: bool, stop: threading
     return files, timing, t_sums, in_flight
 
 
+@single_threaded_blas
 def render_sample(job: dict, k: int) -> dict:
     """Render lens sample ``k`` of the render folder ``job`` describes (group size 1).
 
@@ -164,6 +166,7 @@ def render_sample(job: dict, k: int) -> dict:
     return _run(job, [int(k)], group=False)
 
 
+@single_threaded_blas
 def render_group(job: dict, ks: list[int]) -> dict:
     """Render the lens samples ``ks`` (consecutive, ascending) with several POV-Ray
     processes in flight (:func:`_in_flight`) and return their partial sums.
