@@ -87,15 +87,29 @@ def _inputs(opts: ConvertOptions, st: PlanStart) -> Inputs:
         **inputs_of_shape(st.lens.aperture_shape))
 
 
+def _field_mesh_choice(st: PlanStart, plan: Plan, placement, table):
+    """:func:`~povlens.plan.field_grid.choose_field_mesh` of ``st``'s lens, focus and
+    film with ``table``, made once per start: the plans auto finishes from one start
+    differ only in the method and the samples, on which the choice does not depend
+    (``PlanStart.field_mesh_choices``; the table is kept with it, so its key stays its)."""
+    key = (id(table), plan.povray.version)
+    kept = st.field_mesh_choices.get(key)
+    if kept is not None and kept[0] is table:
+        return kept[1]
+    from povlens.plan.field_grid import choose_field_mesh
+    choice = choose_field_mesh(st.lens, st.film_distance_mm, plan.film, table, placement,
+                               plan.lens.efl_mm, plan.povray.version)
+    st.field_mesh_choices[key] = (table, choice)
+    return choice
+
+
 def _field_mesh(opts: ConvertOptions, plan: Plan, st: PlanStart, placement, table) -> None:
     """Give a mesh plan of ``--ray-mesh field`` its certified field meshes and the
     render size they need (:mod:`povlens.plan.field_grid`)."""
     if opts.sampling.method != "mesh" or opts.sampling.ray_mesh != "field":
         return
-    from povlens.plan.field_grid import choose_field_mesh
     film = plan.film
-    plan.field_mesh, why_not = choose_field_mesh(st.lens, st.film_distance_mm, film, table,
-                                                 placement, plan.lens.efl_mm, plan.povray.version)
+    plan.field_mesh, why_not = _field_mesh_choice(st, plan, placement, table)
     if plan.field_mesh is None:
         plan.inputs = dataclasses.replace(plan.inputs, ray_mesh="pixel")
         plan.add_note(why_not)

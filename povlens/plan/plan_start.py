@@ -89,6 +89,11 @@ class PlanStart:
     scene_size_uses: tuple[str, ...] = ()  # where it reads image_width/height (SceneCamera)
     scene_pretrace: tuple[float, float] | None = None  # its radiosity pretrace (SceneCamera)
     anamorphic: dict | None = None         # Plan.anamorphic (povlens.plan.anamorphic)
+    # the certified field-mesh choices made for this start (plan_finish._field_mesh), by
+    # pupil table and POV-Ray version: auto finishes it up to three times (the probe's
+    # mesh plan, the early samples' plan, the chosen one), the same choice each time
+    field_mesh_choices: dict = dataclasses.field(default_factory=dict, repr=False,
+                                                 compare=False)
 
 
 def start_plan(opts: ConvertOptions) -> PlanStart:

@@ -104,6 +104,26 @@ def test_auto_plan_numbers_equal_a_plan_of_the_chosen_method(tmp_path):
     assert (tmp_path / "a" / "pupil.npz").is_file() and not list((tmp_path / "a").glob(".probe.*"))
 
 
+def test_auto_certifies_the_field_meshes_once(tmp_path, monkeypatch):
+    """The probe's mesh plan, the early samples' plan and the chosen plan share one start
+    (lens, focus, film, pupil table): the field-mesh choice is made once, and a plan made
+    from scratch for the chosen method certifies the same meshes."""
+    import povlens.plan.field_grid as field_grid
+    from povlens.plan.convert import convert, make_plan
+    calls = []
+    choose = field_grid.choose_field_mesh
+    monkeypatch.setattr(field_grid, "choose_field_mesh",
+                        lambda *a, **k: calls.append(1) or choose(*a, **k))
+    opts = ConvertOptions.of(scene=PAPER, lens="dgauss.50mm", focus=1.5,
+                             outdir=str(tmp_path / "a"), width=96, height=72, method="auto")
+    plan = convert(opts)
+    assert plan.inputs.method == "mesh" and plan.field_mesh is not None
+    assert len(calls) == 1
+    again = make_plan(opts.replace(outdir=str(tmp_path / "b"), method="mesh",
+                                   samples=plan.inputs.samples))
+    assert len(calls) == 2 and again.field_mesh == plan.field_mesh
+
+
 @pytest.mark.skipif(__import__("shutil").which("povray") is None, reason="POV-Ray not installed")
 def test_speculative_focal_blur_is_the_final_view(tmp_path):
     """With speculate (povlens render), auto starts the adaptive focal_blur render while
