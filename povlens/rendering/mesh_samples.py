@@ -349,7 +349,7 @@ class _SampleRenders:
     def _launch(self, k: int, stack: tuple[list[int], list[bool], int] | None) -> None:
         """Start POV-Ray on the run of :meth:`start`."""
         while self.wait_first:      # an earlier run still saving the radiosity this one reads
-            self.wait_first.pop().wait()
+            self._saved(self.wait_first.pop())
         self.stacks[k] = stack or ([k], [True], 1)
         if self.photons is None:
             self.photons = photon_load_args(photon_map_for(self.plan, self.folder.path))
@@ -394,9 +394,24 @@ class _SampleRenders:
         before exiting: :func:`povlens.pov.process.povray_finished`)."""
         if self.statistics:
             return self._statistics_in(k, proc, tmp)
-        if self.chained:    # it saves the radiosity samples it hands on as it exits
-            return proc.poll() is not None
-        return povray_finished(proc, tmp / "f.exr", time.perf_counter() - self.running[k][2])
+        # a chained run saves the radiosity samples it hands on after its image: it has
+        # finished once it has closed both (it is then killed, its exit idle skipped)
+        products = [self.folder.radiosity_chain] if self.chained else []
+        return povray_finished(proc, tmp / "f.exr", time.perf_counter() - self.running[k][2],
+                               products)
+
+    def _saved(self, proc: subprocess.Popen) -> None:
+        """Wait until an earlier run whose image is in (``wait_first``) has saved the
+        radiosity samples it hands on, then stop it: POV-Ray closes the file about
+        0.1 s after its image and exits about 0.2 s later, after an idle shutdown
+        (docs/decisions/planning.md, "The chain's hand-over")."""
+        chain = self.folder.radiosity_chain
+        while proc.poll() is None:
+            if chain.is_file() and output_written(proc.pid, chain):
+                proc.kill()
+                break
+            time.sleep(0.005)
+        proc.wait()
 
     def _statistics_in(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
         """POV-Ray exited, or printed its statistics and closed its image (it then idles

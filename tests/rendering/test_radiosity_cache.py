@@ -161,3 +161,36 @@ def test_the_choice_from_the_probes_measurements(tmp_path):
     assert sharing_chosen(tmp_path) is True and probes_missing(tmp_path) == []
     (tmp_path / "radiosity.json").write_text("{broken")
     assert sharing_chosen(tmp_path) is None and probes_missing(tmp_path) == ["own", "shared"]
+
+
+def test_a_run_stopped_once_its_radiosity_file_is_closed_saved_all_of_it(tmp_path):
+    """A run that hands on its radiosity samples is stopped once it has closed its image
+    and the file, before its idle exit (mesh_samples._SampleRenders._saved and the
+    chained runs' povray_finished): the file is the one a run left to exit saves, byte
+    for byte (one thread: POV-Ray's radiosity is then deterministic)."""
+    import time
+    from povlens.pov.executable import find_povray
+    from povlens.pov.process import povray_finished, start_povray
+    (tmp_path / "rad.pov").write_text(RADIOSITY_SCENE)
+
+    killed = []
+
+    def run(name: str, stop_early: bool) -> bool:
+        cmd = [find_povray(), "-D", "-V", "-GA", "+Irad.pov", f"+O{name}.exr", "+FE", "+W64",
+               "+H48", "-A", "+WT1", f"Radiosity_File_Name={name}.rca", "+RFO"]
+        with open(tmp_path / f"{name}.txt", "w") as err:
+            proc = start_povray(cmd, tmp_path, err)
+        t0 = time.perf_counter()
+        if not stop_early:
+            return proc.wait() == 0
+        kill = proc.kill
+        proc.kill = lambda: killed.append(name) or kill()
+        while not povray_finished(proc, tmp_path / f"{name}.exr", time.perf_counter() - t0,
+                                  [tmp_path / f"{name}.rca"]):
+            time.sleep(0.005)
+        return proc.returncode == 0
+
+    assert run("exited", False) and run("stopped", True)
+    assert killed == ["stopped"]        # it was stopped before its exit
+    whole = (tmp_path / "exited.rca").read_bytes()
+    assert len(whole) > 1000 and (tmp_path / "stopped.rca").read_bytes() == whole
