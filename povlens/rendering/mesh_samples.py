@@ -404,14 +404,10 @@ class _SampleRenders:
         """Wait until an earlier run whose image is in (``wait_first``) has saved the
         radiosity samples it hands on, then stop it: POV-Ray closes the file about
         0.1 s after its image and exits about 0.2 s later, after an idle shutdown
-        (docs/decisions/planning.md, "The chain's hand-over")."""
-        chain = self.folder.radiosity_chain
-        while proc.poll() is None:
-            if chain.is_file() and output_written(proc.pid, chain):
-                proc.kill()
-                break
+        (docs/decisions/planning.md, "The chain's hand-over").  The file is the last it
+        writes, so :func:`~povlens.pov.process.povray_finished` judges by it."""
+        while not povray_finished(proc, self.folder.radiosity_chain, FIRST_OUTPUT_S):
             time.sleep(0.005)
-        proc.wait()
 
     def _statistics_in(self, k: int, proc: subprocess.Popen, tmp: Path) -> bool:
         """POV-Ray exited, or printed its statistics and closed its image (it then idles
