@@ -45,9 +45,9 @@ from povlens.pov.mesh import RADIOSITY_READ_FLAG, eye_text, write_ray_mesh
 from povlens.pov.povray_output import povray_failure
 from povlens.pov.render_statistics import (STATISTICS_SWITCHES, render_statistics,
                                            statistics_complete)
-from povlens.pov.process import (FIRST_OUTPUT_S, output_written, pixel_range_args,
-                                 povray_command, povray_finished, render_switches,
-                                 start_povray)
+from povlens.pov.process import (FIRST_OUTPUT_S, POLL_MIN_S, output_written, pixel_range_args,
+                                 poll_interval_s, povray_command, povray_finished,
+                                 render_switches, start_povray)
 from povlens.pupil.rays import sample_points, sample_rays
 from povlens.rendering.field_samples import (placement_of, render_rows, sample_lens,
                                              write_field_stack)
@@ -436,7 +436,7 @@ class _SampleRenders:
             done = [k for k, (p, tmp, _) in self.running.items() if self._finished(k, p, tmp)]
             if done or not block:
                 break
-            time.sleep(0.005)
+            time.sleep(self._poll_s())
         for k in done:
             proc, tmp, t0 = self.running[k]     # tracked until its folder is gone
             try:
@@ -478,6 +478,12 @@ class _SampleRenders:
                 (tmp / "stderr.txt").read_text(errors="replace"))
             self._settle(final=True)
 
+    def _poll_s(self) -> float:
+        """How long to sleep before looking at the runs again (the oldest's age:
+        :func:`~povlens.pov.process.poll_interval_s`)."""
+        started = [t0 for _, _, t0 in self.running.values()]
+        return poll_interval_s(time.perf_counter() - min(started)) if started else POLL_MIN_S
+
     def _what(self, k: int, pov: Path) -> str:
         ks = self.stacks.get(k, ([k],))[0]
         return (f"lens sample {k} of {pov}" if len(ks) == 1 else
@@ -493,7 +499,7 @@ class _SampleRenders:
             self._launch_pending(block=not self.running)
             self._reap(block=False)
             if self.running:
-                time.sleep(0.005)
+                time.sleep(self._poll_s())
 
     def abort(self) -> None:
         """Stop every running process (an error, an interrupt, a cancelled guess).

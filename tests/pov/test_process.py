@@ -378,3 +378,13 @@ def test_kill_descendants_reaches_grandchildren(tmp_path):
                 assert f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
         except FileNotFoundError:
             pass                               # gone and reaped
+
+
+def test_the_poll_interval_grows_with_the_oldest_runs_age_within_its_bounds():
+    from povlens.pov.process import POLL_MAX_S, POLL_MIN_S, POLL_SHARE, poll_interval_s
+    assert poll_interval_s(0.0) == POLL_MIN_S          # a young run: noticed at once
+    assert poll_interval_s(1.0) == POLL_SHARE * 1.0    # 2 % of a second's run
+    assert poll_interval_s(600.0) == POLL_MAX_S        # a long run: never slower than this
+    ages = [0.0, 0.1, 0.5, 1.0, 2.0, 5.0, 60.0]
+    steps = [poll_interval_s(a) for a in ages]
+    assert steps == sorted(steps)
