@@ -16,8 +16,8 @@ from povlens.plan.render_folder import RenderFolder
 from povlens.pov.process import start_render
 from povlens.util.files import temporary_path
 
-__all__ = ["PinholeProduct", "start_product", "product_ready", "wait_product",
-           "cancel_product", "complete"]
+__all__ = ["PinholeProduct", "start_product", "product_started", "product_ready",
+           "wait_product", "cancel_product", "complete"]
 
 
 class PinholeProduct:
@@ -117,6 +117,13 @@ def start_product(final: Path, start: Callable[[], PinholeProduct]) -> None:
     with _MAKING_LOCK:
         if final not in _MAKING:
             _MAKING[final] = _Making(start())
+
+
+def product_started(final: Path) -> bool:
+    """Whether a render :func:`start_product` started for ``final`` is registered and
+    nothing has waited for it yet (it may have finished); never blocks."""
+    with _MAKING_LOCK:
+        return Path(final).absolute() in _MAKING
 
 
 def product_ready(final: Path) -> bool:
