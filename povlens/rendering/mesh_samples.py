@@ -45,7 +45,7 @@ from povlens.pov.mesh import RADIOSITY_READ_FLAG, eye_text, write_ray_mesh
 from povlens.pov.povray_output import povray_failure
 from povlens.pov.render_statistics import (STATISTICS_SWITCHES, render_statistics,
                                            statistics_complete)
-from povlens.pov.process import (FIRST_OUTPUT_S, POLL_MIN_S, output_written, pixel_range_args,
+from povlens.pov.process import (FIRST_OUTPUT_S, output_written, pixel_range_args,
                                  poll_interval_s, povray_command, povray_finished,
                                  render_switches, start_povray)
 from povlens.pupil.rays import sample_points, sample_rays
@@ -481,8 +481,8 @@ class _SampleRenders:
     def _poll_s(self) -> float:
         """How long to sleep before looking at the runs again (the oldest's age:
         :func:`~povlens.pov.process.poll_interval_s`)."""
-        started = [t0 for _, _, t0 in self.running.values()]
-        return poll_interval_s(time.perf_counter() - min(started)) if started else POLL_MIN_S
+        now = time.perf_counter()
+        return poll_interval_s(now - min((t0 for _, _, t0 in self.running.values()), default=now))
 
     def _what(self, k: int, pov: Path) -> str:
         ks = self.stacks.get(k, ([k],))[0]
